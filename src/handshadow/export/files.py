@@ -1,0 +1,75 @@
+"""Writing a result folder completely or not at all."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+
+
+class OutputError(ValueError):
+    """The output folder cannot be used."""
+
+
+class ResultFolder:
+    """Collects a result in a hidden sibling folder and moves it into place on ``commit``.
+
+    A non-empty target folder is refused unless ``force``. If anything fails (or the process is
+    interrupted) before ``commit``, the target folder is left as it was.
+
+        with ResultFolder(out, force) as folder:
+            write_png(folder / "shadow.png", image)
+            folder.commit()
+    """
+
+    def __init__(self, path: str | Path, force: bool = False):
+        self.path = Path(path)
+        if self.path.exists() and not self.path.is_dir():
+            raise OutputError(f"output path {self.path} exists and is not a folder")
+        if self.path.is_dir() and any(self.path.iterdir()) and not force:
+            raise OutputError(f"output folder {self.path} is not empty (use --force to overwrite)")
+        self.staging = self.path.parent / f".{self.path.name}.partial-{os.getpid()}"
+
+    def __enter__(self) -> "ResultFolder":
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            shutil.rmtree(self.staging, ignore_errors=True)
+            self.staging.mkdir()
+        except OSError as exc:
+            raise OutputError(f"cannot write to {self.path.parent}: {exc.strerror}") from None
+        return self
+
+    def __truediv__(self, name: str) -> Path:
+        return self.staging / name
+
+    def commit(self) -> Path:
+        """Move every staged file into the target folder (replacing same-named files)."""
+        self.path.mkdir(parents=True, exist_ok=True)
+        for item in sorted(self.staging.iterdir()):
+            dest = self.path / item.name
+            if dest.is_dir() and not dest.is_symlink():
+                shutil.rmtree(dest)
+            os.replace(item, dest)
+        self.staging.rmdir()
+        return self.path
+
+    def __exit__(self, *exc) -> None:
+        shutil.rmtree(self.staging, ignore_errors=True)
+
+
+def write_png(path: Path, image: np.ndarray) -> None:
+    """Write a uint8 (H, W) or (H, W, 3|4) image."""
+    iio.imwrite(path, np.ascontiguousarray(image), extension=".png")
+
+
+def write_json(path: Path, data: dict) -> None:
+    Path(path).write_text(json.dumps(data, indent=1) + "\n")
+
+
+def shadow_image(mask: np.ndarray) -> np.ndarray:
+    """(H, W) mask in [0, 1] -> uint8 black shadow on a white wall."""
+    return ((1.0 - np.clip(mask, 0, 1)) * 255 + 0.5).astype(np.uint8)

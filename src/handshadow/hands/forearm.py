@@ -1,0 +1,114 @@
+"""The forearm: a closed tube extruded from the hand mesh's open wrist boundary.
+
+In a real hand shadow the forearm is lit too. The tube starts at the wrist boundary loop itself
+(so hand and forearm form one closed surface), blends the loop's cross-section into an ellipse
+over the first centimetres, widens toward the elbow like a real forearm, and ends in a rounded
+cap. It is skinned rigidly to the root bone, so it follows only the hand's global transform.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handshadow.hands.rig import HandRig
+
+FOREARM_LENGTH_M = 0.28  # wrist crease to elbow of an adult (about 25-28 cm)
+WIDENING = 0.35  # cross-section scale at the widest point minus one (forearm vs. wrist)
+_STATIONS_M = np.array(
+    [0.004, 0.010, 0.018, 0.028, 0.04, 0.055, 0.075, 0.10, 0.13, 0.16, 0.19, 0.22, 0.25, 0.27, 0.28]
+)
+_CAP_FRACTIONS = np.array([0.8, 0.5])  # rings of the rounded cap, as a share of the last radius
+
+
+def forearm_geometry(rig: HandRig) -> tuple[np.ndarray, np.ndarray]:
+    """New vertices (N, 3) and faces (M, 3) of the forearm, indexed after the hand's vertices.
+
+    Raises ValueError if the hand mesh has no open wrist boundary.
+    """
+    loop = rig.wrist_loop
+    if len(loop) < 3:
+        raise ValueError(f"the {rig.model} {rig.side} hand mesh has no open wrist boundary for a forearm")
+    ring0 = rig.rest_vertices[loop]
+    centre = ring0.mean(0)
+    # Extrusion axis: the wrist loop's plane normal, pointing away from the fingers (-y).
+    _, _, vt = np.linalg.svd(ring0 - centre)
+    axis = vt[2] if vt[2][1] < 0 else -vt[2]
+    offsets = ring0 - centre
+    offsets -= np.outer(offsets @ axis, axis)
+    ellipse = _ellipse_like(offsets)
+    rings = []
+    for s in _STATIONS_M:
+        blend = _smoothstep(s / 0.03)
+        scale = 1.0 + WIDENING * _smoothstep(s / 0.18)
+        rings.append(centre + s * axis + scale * ((1 - blend) * offsets + blend * ellipse))
+    last_scale = 1.0 + WIDENING
+    for k, f in enumerate(_CAP_FRACTIONS):
+        depth = FOREARM_LENGTH_M + 0.02 * np.sqrt(1 - f**2) * (k + 1) / len(_CAP_FRACTIONS)
+        rings.append(centre + depth * axis + f * last_scale * ellipse)
+    tip = centre + (FOREARM_LENGTH_M + 0.025) * axis
+
+    n_hand, n_loop = rig.num_vertices, len(loop)
+    vertices = np.concatenate([np.concatenate(rings), tip[None]])
+    faces = []
+    prev = loop
+    for k in range(len(rings)):
+        cur = n_hand + k * n_loop + np.arange(n_loop)
+        for i in range(n_loop):
+            j = (i + 1) % n_loop
+            faces.append((prev[i], prev[j], cur[j]))
+            faces.append((prev[i], cur[j], cur[i]))
+        prev = cur
+    tip_index = n_hand + len(rings) * n_loop
+    for i in range(n_loop):
+        faces.append((prev[i], prev[(i + 1) % n_loop], tip_index))
+    return vertices, np.asarray(faces, dtype=np.int64)
+
+
+def attach_forearm(rig: HandRig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Hand plus forearm: vertices (V', 3), faces (F', 3), skin weights (V', K).
+
+    The forearm's vertices are weighted fully to the root bone (bone 0), which only the global
+    transform moves; the hand's vertices keep their indices.
+    """
+    extra_v, extra_f = forearm_geometry(rig)
+    weights = np.zeros((len(extra_v), rig.skin_weights.shape[1]))
+    weights[:, 0] = 1.0
+    return (
+        np.concatenate([rig.rest_vertices, extra_v]),
+        np.concatenate([rig.faces, extra_f]),
+        np.concatenate([rig.skin_weights, weights]),
+    )
+
+
+def cap_wrist(rig: HandRig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Hand alone, its wrist opening closed by a fan around the loop's centre, so the mesh is
+    closed (the renderer relies on that). Returns vertices, faces, skin weights as attach_forearm."""
+    loop = rig.wrist_loop
+    if len(loop) < 3:
+        return rig.rest_vertices, rig.faces, rig.skin_weights
+    centre = rig.rest_vertices[loop].mean(0)
+    c = rig.num_vertices
+    fan = np.stack([loop, np.roll(loop, -1), np.full(len(loop), c)], 1)
+    weights = np.zeros((1, rig.skin_weights.shape[1]))
+    weights[0, 0] = 1.0
+    return (
+        np.concatenate([rig.rest_vertices, centre[None]]),
+        np.concatenate([rig.faces, fan]),
+        np.concatenate([rig.skin_weights, weights]),
+    )
+
+
+def _ellipse_like(offsets: np.ndarray) -> np.ndarray:
+    """Points on the ellipse with the same second moments as ``offsets`` (L, 3), at the same
+    angles, so the i-th ellipse point sits beside the i-th loop point."""
+    cov = offsets.T @ offsets / len(offsets)
+    evals, evecs = np.linalg.eigh(cov)
+    a, b = evecs[:, 2], evecs[:, 1]  # in-plane principal axes
+    ra, rb = np.sqrt(2 * evals[2]), np.sqrt(2 * evals[1])
+    angles = np.arctan2((offsets @ b) / rb, (offsets @ a) / ra)
+    return np.outer(ra * np.cos(angles), a) + np.outer(rb * np.sin(angles), b)
+
+
+def _smoothstep(x: float) -> float:
+    x = float(np.clip(x, 0.0, 1.0))
+    return x * x * (3 - 2 * x)

@@ -1,0 +1,160 @@
+"""pose.json: the hands of a result (per hand its side, model, shape, joint angles, global
+rotation and translation) plus the scene, as written by ``fit`` and read by ``render``.
+
+    {"format": "handshadow.pose/1",
+     "scene": {...scene.json contract without "meshes"...},
+     "forearm": true,
+     "hands": [{"side": "right", "model": "anny", "shape": {...},
+                "pose_deg": [[twist, spread, bend] x 15],   # rig.JOINT_NAMES order, degrees
+                "rotation": [[...], [...], [...]],           # hand frame -> world, row-major
+                "translation": [x, y, z]},                   # wrist position, metres
+               ...],
+     "fit": {...}}                                           # optional: IoU, iterations, ...
+
+Joint angles follow docs/conventions.md: positive bend flexes toward the palm, positive spread
+moves toward the thumb, on either hand.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from handshadow.hands.rig import JOINT_NAMES, check_side
+from handshadow.scene import Scene, SceneError
+
+FORMAT = "handshadow.pose/1"
+
+
+class PoseFileError(ValueError):
+    """A pose file that cannot be read."""
+
+
+@dataclasses.dataclass(frozen=True)
+class HandPose:
+    """One posed hand. pose_deg (15, 3) twist/spread/bend degrees; rotation (3, 3); translation (3,) m."""
+
+    side: str
+    model: str
+    shape: dict
+    pose_deg: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    def tensors(self, dtype=torch.float32, device="cpu") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(1, 15, 3) radians, (1, 3, 3), (1, 3) for HandModel.forward."""
+        t = dict(dtype=dtype, device=device)
+        return (
+            torch.as_tensor(np.radians(self.pose_deg), **t)[None],
+            torch.as_tensor(self.rotation, **t)[None],
+            torch.as_tensor(self.translation, **t)[None],
+        )
+
+    def to_json(self) -> dict:
+        return {
+            "side": self.side,
+            "model": self.model,
+            "shape": self.shape,
+            "pose_deg": np.round(np.asarray(self.pose_deg, float), 4).tolist(),
+            "rotation": np.round(np.asarray(self.rotation, float), 9).tolist(),
+            "translation": np.round(np.asarray(self.translation, float), 9).tolist(),
+        }
+
+
+@dataclasses.dataclass(frozen=True)
+class PoseSet:
+    """The content of a pose file."""
+
+    hands: tuple[HandPose, ...]
+    scene: Scene
+    forearm: bool = True
+    fit: dict | None = None
+
+    def to_json(self) -> dict:
+        out = {
+            "format": FORMAT,
+            "scene": self.scene.to_json(),
+            "forearm": self.forearm,
+            "hands": [h.to_json() for h in self.hands],
+        }
+        if self.fit is not None:
+            out["fit"] = self.fit
+        return out
+
+    def save(self, path: Path) -> None:
+        Path(path).write_text(json.dumps(self.to_json(), indent=1) + "\n")
+
+
+def load_pose_file(path: str | Path) -> PoseSet:
+    """Read and check a pose file; raises PoseFileError with a one-line reason."""
+    path = Path(path)
+    if not path.is_file():
+        raise PoseFileError(f"pose file not found: {path}")
+    try:
+        data = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PoseFileError(f"{path} is not a JSON pose file ({exc.__class__.__name__}: {exc})") from None
+    return parse_pose(data, str(path))
+
+
+def parse_pose(data, where: str = "pose") -> PoseSet:
+    if not isinstance(data, dict):
+        raise PoseFileError(f"{where}: expected a JSON object")
+    if data.get("format", FORMAT) != FORMAT:
+        raise PoseFileError(f"{where}: unsupported format {data.get('format')!r} (expected {FORMAT!r})")
+    try:
+        scene = Scene.from_json(data["scene"]) if "scene" in data else Scene.default()
+    except SceneError as exc:
+        raise PoseFileError(f"{where}: scene: {exc}") from None
+    hands_data = data.get("hands")
+    if not isinstance(hands_data, list) or not 1 <= len(hands_data) <= 2:
+        raise PoseFileError(f"{where}: 'hands' must be a list of one or two hands")
+    hands = tuple(_parse_hand(h, f"{where}: hands[{i}]") for i, h in enumerate(hands_data))
+    if len(hands) == 2 and hands[0].side == hands[1].side:
+        raise PoseFileError(f"{where}: two hands must be one left and one right")
+    forearm = data.get("forearm", True)
+    if not isinstance(forearm, bool):
+        raise PoseFileError(f"{where}: 'forearm' must be true or false")
+    fit = data.get("fit")
+    return PoseSet(hands=hands, scene=scene, forearm=forearm, fit=fit if isinstance(fit, dict) else None)
+
+
+def _parse_hand(h, where: str) -> HandPose:
+    if not isinstance(h, dict):
+        raise PoseFileError(f"{where}: expected an object")
+    try:
+        side = check_side(h.get("side"))
+    except ValueError as exc:
+        raise PoseFileError(f"{where}: {exc}") from None
+    model = h.get("model", "anny")
+    if model not in ("anny", "mano"):
+        raise PoseFileError(f"{where}: model must be 'anny' or 'mano', got {model!r}")
+    shape = h.get("shape") or {}
+    if not isinstance(shape, dict):
+        raise PoseFileError(f"{where}: shape must be an object")
+    pose = _array(h.get("pose_deg", np.zeros((15, 3))), (len(JOINT_NAMES), 3), f"{where}.pose_deg")
+    rotation = _array(h.get("rotation", np.eye(3)), (3, 3), f"{where}.rotation")
+    u, sv, vt = np.linalg.svd(rotation)
+    if np.abs(sv - 1).max() > 1e-3 or np.linalg.det(rotation) < 0:
+        raise PoseFileError(f"{where}.rotation must be a rotation matrix (orthonormal, det +1)")
+    rotation = u @ vt
+    translation = _array(h.get("translation"), (3,), f"{where}.translation")
+    return HandPose(side, model, shape, pose, rotation, translation)
+
+
+def _array(value, shape, where: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise PoseFileError(f"{where} must be numbers of shape {shape}") from None
+    if arr.shape != shape:
+        raise PoseFileError(f"{where} must have shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise PoseFileError(f"{where} must be finite")
+    if np.abs(arr).max(initial=0.0) > 1e4:
+        raise PoseFileError(f"{where} has implausibly large values")
+    return arr

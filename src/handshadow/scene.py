@@ -1,0 +1,221 @@
+"""The scene: a light, a wall plane and an image frame on the wall (metres, world frame).
+
+World frame (docs/conventions.md): the wall is the plane z = 0 and faces +z; the lamp stands
+2 m in front of it on the z axis; +y is up and +x is to the right of a person who stands by the
+lamp and looks at the wall. The image frame is centred on the foot of the lamp.
+
+Pixel convention: the centre of pixel (row i, column j) is
+    origin + (j + 0.5) / W * u + (i + 0.5) / H * v,
+with ``origin`` the frame's outer top-left corner, ``u`` its full width (left to right) and
+``v`` its full height (top to bottom). Continuous pixel coordinates (x, y) = (column, row)
+measured from the top-left corner put pixel centres at (j + 0.5, i + 0.5).
+
+``scene.json`` contract (written by :meth:`Scene.to_json`):
+    {"light": {"type": "point", "position": [x, y, z]}  or  {"type": "directional",
+     "direction": [x, y, z]},
+     "wall": {"point": [...], "normal": [...]},
+     "image": {"width": W, "height": H, "origin": [...], "u": [...], "v": [...]},
+     "meshes": ["left.obj", "right.obj"]}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Literal
+
+import numpy as np
+import torch
+
+LightType = Literal["point", "directional"]
+LAMP_TO_WALL_M = 2.0
+FRAME_HEIGHT_M = {"point": 0.8, "directional": 0.4}  # a hand's shadow fills about half of it
+
+
+class SceneError(ValueError):
+    """A scene description that cannot be used."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Light:
+    """A point light at ``position`` or a directional light shining along ``direction``."""
+
+    type: LightType
+    position: tuple[float, float, float] | None = None
+    direction: tuple[float, float, float] | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Wall:
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]  # unit, facing the light
+
+
+@dataclasses.dataclass(frozen=True)
+class ImageFrame:
+    width: int
+    height: int
+    origin: tuple[float, float, float]
+    u: tuple[float, float, float]
+    v: tuple[float, float, float]
+
+    def pixel_centres(self) -> np.ndarray:
+        """(H, W, 3) world positions of the pixel centres, float64."""
+        j = (np.arange(self.width) + 0.5) / self.width
+        i = (np.arange(self.height) + 0.5) / self.height
+        o, u, v = (np.asarray(a, dtype=np.float64) for a in (self.origin, self.u, self.v))
+        return o + j[None, :, None] * u + i[:, None, None] * v
+
+
+@dataclasses.dataclass(frozen=True)
+class Scene:
+    light: Light
+    wall: Wall
+    image: ImageFrame
+
+    # -- construction -------------------------------------------------------------------
+    @staticmethod
+    def default(width: int = 256, height: int = 256, light: LightType = "point") -> "Scene":
+        """A lamp 2 m in front of a wall, the image frame centred on the wall."""
+        if light not in ("point", "directional"):
+            raise SceneError(f"light must be 'point' or 'directional', got {light!r}")
+        if width < 1 or height < 1:
+            raise SceneError(f"image size must be positive, got {width} x {height}")
+        h_m = FRAME_HEIGHT_M[light]
+        w_m = h_m * width / height
+        lamp = (0.0, 0.0, LAMP_TO_WALL_M)
+        return Scene(
+            light=Light("point", position=lamp) if light == "point" else Light("directional", direction=(0.0, 0.0, -1.0)),
+            wall=Wall(point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0)),
+            image=ImageFrame(
+                width=width, height=height, origin=(-w_m / 2, h_m / 2, 0.0), u=(w_m, 0.0, 0.0), v=(0.0, -h_m, 0.0)
+            ),
+        )
+
+    def with_size(self, width: int, height: int) -> "Scene":
+        """The same frame rasterised at another resolution."""
+        return dataclasses.replace(self, image=dataclasses.replace(self.image, width=width, height=height))
+
+    # -- geometry -----------------------------------------------------------------------
+    def light_depth_range(self) -> tuple[float, float]:
+        """Distances along the wall normal (from the wall) between which geometry casts a
+        shadow: (0, lamp distance) for a point light, (0, inf) for a directional one."""
+        if self.light.type == "point":
+            n = np.asarray(self.wall.normal)
+            return 0.0, float((np.asarray(self.light.position) - np.asarray(self.wall.point)) @ n)
+        return 0.0, math.inf
+
+    def project(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Project points from the light onto the wall, in continuous pixel coordinates.
+
+        Args:
+            points: (..., 3) world positions, metres.
+        Returns:
+            xy: (..., 2) (column, row) pixel coordinates; pixel centres at (j+0.5, i+0.5).
+            height: (...,) distance of each point in front of the wall along its normal, metres.
+                The projection is valid for 0 < height < lamp distance (point light).
+        Differentiable in ``points``; constants follow the points' device and dtype.
+        """
+        t = dict(dtype=points.dtype, device=points.device)
+        n = torch.as_tensor(self.wall.normal, **t)
+        w0 = torch.as_tensor(self.wall.point, **t)
+        height = (points - w0) @ n
+        if self.light.type == "point":
+            lamp = torch.as_tensor(self.light.position, **t)
+            lamp_h = (lamp - w0) @ n
+            # Ray lamp -> p meets the wall at lamp + (p - lamp) * lamp_h / (lamp_h - height).
+            scale = lamp_h / (lamp_h - height)
+            on_wall = lamp + (points - lamp) * scale[..., None]
+        else:
+            d = torch.as_tensor(self.light.direction, **t)
+            on_wall = points + d * (-height / (d @ n))[..., None]
+        return self.wall_to_pixels(on_wall), height
+
+    def wall_to_pixels(self, on_wall: torch.Tensor) -> torch.Tensor:
+        """(..., 3) points on the wall -> (..., 2) continuous (column, row) pixel coordinates."""
+        t = dict(dtype=on_wall.dtype, device=on_wall.device)
+        o = torch.as_tensor(self.image.origin, **t)
+        u = torch.as_tensor(self.image.u, **t)
+        v = torch.as_tensor(self.image.v, **t)
+        rel = on_wall - o
+        x = rel @ u / (u @ u) * self.image.width
+        y = rel @ v / (v @ v) * self.image.height
+        return torch.stack([x, y], dim=-1)
+
+    def pixel_size_m(self) -> float:
+        """Edge length of one pixel on the wall, metres (pixels are square by construction)."""
+        return float(np.linalg.norm(self.image.v)) / self.image.height
+
+    # -- scene.json ---------------------------------------------------------------------
+    def to_json(self, meshes: list[str] | None = None) -> dict:
+        light = {"type": self.light.type}
+        if self.light.type == "point":
+            light["position"] = list(map(float, self.light.position))
+        else:
+            light["direction"] = list(map(float, self.light.direction))
+        out = {
+            "light": light,
+            "wall": {"point": list(map(float, self.wall.point)), "normal": list(map(float, self.wall.normal))},
+            "image": {
+                "width": int(self.image.width),
+                "height": int(self.image.height),
+                "origin": list(map(float, self.image.origin)),
+                "u": list(map(float, self.image.u)),
+                "v": list(map(float, self.image.v)),
+            },
+        }
+        if meshes is not None:
+            out["meshes"] = list(meshes)
+        return out
+
+    @staticmethod
+    def from_json(data: dict) -> "Scene":
+        """Parse and check the scene.json contract (``meshes`` is ignored here)."""
+        try:
+            lt = data["light"]["type"]
+            if lt == "point":
+                light = Light("point", position=_vec3(data["light"]["position"], "light.position"))
+            elif lt == "directional":
+                direction = np.asarray(_vec3(data["light"]["direction"], "light.direction"))
+                if np.linalg.norm(direction) == 0:
+                    raise SceneError("light.direction must not be zero")
+                light = Light("directional", direction=tuple(direction / np.linalg.norm(direction)))
+            else:
+                raise SceneError(f"light.type must be 'point' or 'directional', got {lt!r}")
+            normal = np.asarray(_vec3(data["wall"]["normal"], "wall.normal"))
+            if np.linalg.norm(normal) == 0:
+                raise SceneError("wall.normal must not be zero")
+            wall = Wall(point=_vec3(data["wall"]["point"], "wall.point"), normal=tuple(normal / np.linalg.norm(normal)))
+            im = data["image"]
+            width, height = int(im["width"]), int(im["height"])
+            if width < 1 or height < 1 or width > 8192 or height > 8192:
+                raise SceneError(f"image size must be 1..8192 pixels, got {width} x {height}")
+            image = ImageFrame(width, height, _vec3(im["origin"], "image.origin"), _vec3(im["u"], "image.u"), _vec3(im["v"], "image.v"))
+        except (KeyError, TypeError) as exc:
+            raise SceneError(f"scene is missing or has a malformed field: {exc}") from None
+        scene = Scene(light, wall, image)
+        scene._check()
+        return scene
+
+    def _check(self) -> None:
+        n = np.asarray(self.wall.normal)
+        u, v = np.asarray(self.image.u), np.asarray(self.image.v)
+        if abs(u @ v) > 1e-6 * np.linalg.norm(u) * np.linalg.norm(v) or abs(u @ n) > 1e-6 * np.linalg.norm(u) or abs(v @ n) > 1e-6 * np.linalg.norm(v):
+            raise SceneError("image.u and image.v must be orthogonal and lie in the wall plane")
+        if abs(np.linalg.norm(u) / self.image.width - np.linalg.norm(v) / self.image.height) > 1e-6 * np.linalg.norm(v) / self.image.height:
+            raise SceneError("image pixels must be square (|u|/width == |v|/height)")
+        if self.light.type == "point":
+            if (np.asarray(self.light.position) - np.asarray(self.wall.point)) @ n <= 0:
+                raise SceneError("the point light must be in front of the wall (on the side its normal faces)")
+        elif np.asarray(self.light.direction) @ n >= 0:
+            raise SceneError("the directional light must shine toward the wall (direction . normal < 0)")
+
+
+def _vec3(value, name: str) -> tuple[float, float, float]:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"{name} must be three numbers") from None
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise SceneError(f"{name} must be three finite numbers, got {value!r}")
+    return tuple(float(a) for a in arr)
