@@ -31,13 +31,24 @@ def hand(side, euler_deg, translation, fingers=None):
     }
 
 
-SPREAD = {"index": [[0, 8, 0], [0, 0, 0], [0, 0, 0]], "ring": [[0, -6, 0], [0, 0, 0], [0, 0, 0]], "little": [[0, -14, 0], [0, 0, 0], [0, 0, 0]], "thumb": [[0, 10, 0], [0, 0, 0], [0, 0, 0]]}
+SPREAD = {
+    "index": [[0, 8, 0], [0, 0, 0], [0, 0, 0]],
+    "ring": [[0, -6, 0], [0, 0, 0], [0, 0, 0]],
+    "little": [[0, -14, 0], [0, 0, 0], [0, 0, 0]],
+    "thumb": [[0, 10, 0], [0, 0, 0], [0, 0, 0]],
+}
 
 POSE_SETS = {
-    "open-hand": ("One right hand, fingers up and slightly spread.", [hand("right", (0, 0, 0), (0.0, -0.12, 1.0), SPREAD)]),
+    "open-hand": (
+        "One right hand, fingers up and slightly spread.",
+        [hand("right", (0, 0, 0), (0.0, -0.12, 1.0), SPREAD)],
+    ),
     "two-hands": (
         "Both hands raised, fingers spread, thumbs almost touching.",
-        [hand("left", (0, 0, -18), (-0.085, -0.12, 1.0), SPREAD), hand("right", (0, 0, 18), (0.085, -0.12, 1.0), SPREAD)],
+        [
+            hand("left", (0, 0, -18), (-0.085, -0.12, 1.0), SPREAD),
+            hand("right", (0, 0, 18), (0.085, -0.12, 1.0), SPREAD),
+        ],
     ),
 }
 

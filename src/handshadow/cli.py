@@ -9,35 +9,24 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from pathlib import Path
 
 from handshadow import examples
+from handshadow.errors import HandshadowError
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
 
-class UserError(Exception):
-    """An error whose message is all the user needs."""
-
-
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from handshadow.export.files import OutputError
-    from handshadow.hands.mano import ManoFileError
-    from handshadow.pipeline import PlacementError
-    from handshadow.posefile import PoseFileError
-    from handshadow.scene import SceneError
-
-    return (UserError, OutputError, ManoFileError, PlacementError, PoseFileError, SceneError)
-
-
 def cmd_render(args: argparse.Namespace) -> int:
-    from handshadow.pipeline import render_pose_set
     from handshadow.posefile import load_pose_file
 
-    pose_set = load_pose_file(examples.pose_path(args.pose))
+    pose_set = load_pose_file(examples.pose_path(args.pose))  # checked before the heavy imports
+    from handshadow.pipeline import render_pose_set
+
     out = render_pose_set(pose_set, args.out, force=args.force, mano_dir=args.mano_dir)
-    print(f"wrote {out}/: shadow.png scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in pose_set.hands))
+    print(
+        f"wrote {out}/: shadow.png scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in pose_set.hands)
+    )
     return 0
 
 
@@ -49,7 +38,9 @@ def cmd_examples(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="handshadow", description="Hand shadows: find, render and morph poses of your hands.")
+    parser = argparse.ArgumentParser(
+        prog="handshadow", description="Hand shadows: find, render and morph poses of your hands."
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log details")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -74,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("handshadow: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except _user_errors() as exc:
+    except HandshadowError as exc:
         print(f"handshadow: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from handshadow.errors import HandshadowError
 from handshadow.export.files import ResultFolder, shadow_image, write_json, write_png
 from handshadow.export.meshes import round_vertices, write_glb, write_obj
 from handshadow.export.pictures import scene_picture
@@ -21,7 +22,7 @@ from handshadow.render import MeshTopology, shadow_mask
 from handshadow.scene import Scene
 
 
-class PlacementError(ValueError):
+class PlacementError(HandshadowError):
     """Geometry that does not lie between the light and the wall."""
 
 
@@ -56,9 +57,13 @@ def check_placement(scene: Scene, meshes: list[PosedMesh]) -> None:
     for m in meshes:
         h = (m.vertices - np.asarray(scene.wall.point)) @ n
         if h.min() <= lo:
-            raise PlacementError(f"the {m.side} hand reaches through the wall ({h.min():.3f} m); move it toward the light")
+            raise PlacementError(
+                f"the {m.side} hand reaches through the wall ({h.min():.3f} m); move it toward the light"
+            )
         if h.max() >= hi:
-            raise PlacementError(f"the {m.side} hand reaches the light's plane ({h.max():.3f} m from the wall); move it toward the wall")
+            raise PlacementError(
+                f"the {m.side} hand reaches the light's plane ({h.max():.3f} m from the wall); move it toward the wall"
+            )
 
 
 def exact_shadow(scene: Scene, meshes: list[PosedMesh]) -> np.ndarray:

@@ -22,15 +22,15 @@ import json
 from pathlib import Path
 
 import numpy as np
-import torch
 
+from handshadow.errors import HandshadowError
 from handshadow.hands.rig import JOINT_NAMES, check_side
 from handshadow.scene import Scene, SceneError
 
 FORMAT = "handshadow.pose/1"
 
 
-class PoseFileError(ValueError):
+class PoseFileError(HandshadowError):
     """A pose file that cannot be read."""
 
 
@@ -45,9 +45,11 @@ class HandPose:
     rotation: np.ndarray
     translation: np.ndarray
 
-    def tensors(self, dtype=torch.float32, device="cpu") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """(1, 15, 3) radians, (1, 3, 3), (1, 3) for HandModel.forward."""
-        t = dict(dtype=dtype, device=device)
+    def tensors(self, dtype=None, device="cpu"):
+        """(1, 15, 3) radians, (1, 3, 3), (1, 3) tensors for HandModel.forward (float32 by default)."""
+        import torch
+
+        t = dict(dtype=dtype or torch.float32, device=device)
         return (
             torch.as_tensor(np.radians(self.pose_deg), **t)[None],
             torch.as_tensor(self.rotation, **t)[None],

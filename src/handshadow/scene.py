@@ -22,17 +22,21 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-import torch
+
+from handshadow.errors import HandshadowError
+
+if TYPE_CHECKING:
+    import torch
 
 LightType = Literal["point", "directional"]
 LAMP_TO_WALL_M = 2.0
 FRAME_HEIGHT_M = {"point": 0.8, "directional": 0.4}  # a hand's shadow fills about half of it
 
 
-class SceneError(ValueError):
+class SceneError(HandshadowError):
     """A scene description that cannot be used."""
 
 
@@ -75,7 +79,7 @@ class Scene:
 
     # -- construction -------------------------------------------------------------------
     @staticmethod
-    def default(width: int = 256, height: int = 256, light: LightType = "point") -> "Scene":
+    def default(width: int = 256, height: int = 256, light: LightType = "point") -> Scene:
         """A lamp 2 m in front of a wall, the image frame centred on the wall."""
         if light not in ("point", "directional"):
             raise SceneError(f"light must be 'point' or 'directional', got {light!r}")
@@ -85,14 +89,16 @@ class Scene:
         w_m = h_m * width / height
         lamp = (0.0, 0.0, LAMP_TO_WALL_M)
         return Scene(
-            light=Light("point", position=lamp) if light == "point" else Light("directional", direction=(0.0, 0.0, -1.0)),
+            light=Light("point", position=lamp)
+            if light == "point"
+            else Light("directional", direction=(0.0, 0.0, -1.0)),
             wall=Wall(point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0)),
             image=ImageFrame(
                 width=width, height=height, origin=(-w_m / 2, h_m / 2, 0.0), u=(w_m, 0.0, 0.0), v=(0.0, -h_m, 0.0)
             ),
         )
 
-    def with_size(self, width: int, height: int) -> "Scene":
+    def with_size(self, width: int, height: int) -> Scene:
         """The same frame rasterised at another resolution."""
         return dataclasses.replace(self, image=dataclasses.replace(self.image, width=width, height=height))
 
@@ -116,6 +122,8 @@ class Scene:
                 The projection is valid for 0 < height < lamp distance (point light).
         Differentiable in ``points``; constants follow the points' device and dtype.
         """
+        import torch
+
         t = dict(dtype=points.dtype, device=points.device)
         n = torch.as_tensor(self.wall.normal, **t)
         w0 = torch.as_tensor(self.wall.point, **t)
@@ -133,6 +141,8 @@ class Scene:
 
     def wall_to_pixels(self, on_wall: torch.Tensor) -> torch.Tensor:
         """(..., 3) points on the wall -> (..., 2) continuous (column, row) pixel coordinates."""
+        import torch
+
         t = dict(dtype=on_wall.dtype, device=on_wall.device)
         o = torch.as_tensor(self.image.origin, **t)
         u = torch.as_tensor(self.image.u, **t)
@@ -169,7 +179,7 @@ class Scene:
         return out
 
     @staticmethod
-    def from_json(data: dict) -> "Scene":
+    def from_json(data: dict) -> Scene:
         """Parse and check the scene.json contract (``meshes`` is ignored here)."""
         try:
             lt = data["light"]["type"]
@@ -190,7 +200,9 @@ class Scene:
             width, height = int(im["width"]), int(im["height"])
             if width < 1 or height < 1 or width > 8192 or height > 8192:
                 raise SceneError(f"image size must be 1..8192 pixels, got {width} x {height}")
-            image = ImageFrame(width, height, _vec3(im["origin"], "image.origin"), _vec3(im["u"], "image.u"), _vec3(im["v"], "image.v"))
+            image = ImageFrame(
+                width, height, _vec3(im["origin"], "image.origin"), _vec3(im["u"], "image.u"), _vec3(im["v"], "image.v")
+            )
         except (KeyError, TypeError) as exc:
             raise SceneError(f"scene is missing or has a malformed field: {exc}") from None
         scene = Scene(light, wall, image)
@@ -200,9 +212,16 @@ class Scene:
     def _check(self) -> None:
         n = np.asarray(self.wall.normal)
         u, v = np.asarray(self.image.u), np.asarray(self.image.v)
-        if abs(u @ v) > 1e-6 * np.linalg.norm(u) * np.linalg.norm(v) or abs(u @ n) > 1e-6 * np.linalg.norm(u) or abs(v @ n) > 1e-6 * np.linalg.norm(v):
+        if (
+            abs(u @ v) > 1e-6 * np.linalg.norm(u) * np.linalg.norm(v)
+            or abs(u @ n) > 1e-6 * np.linalg.norm(u)
+            or abs(v @ n) > 1e-6 * np.linalg.norm(v)
+        ):
             raise SceneError("image.u and image.v must be orthogonal and lie in the wall plane")
-        if abs(np.linalg.norm(u) / self.image.width - np.linalg.norm(v) / self.image.height) > 1e-6 * np.linalg.norm(v) / self.image.height:
+        if (
+            abs(np.linalg.norm(u) / self.image.width - np.linalg.norm(v) / self.image.height)
+            > 1e-6 * np.linalg.norm(v) / self.image.height
+        ):
             raise SceneError("image pixels must be square (|u|/width == |v|/height)")
         if self.light.type == "point":
             if (np.asarray(self.light.position) - np.asarray(self.wall.point)) @ n <= 0:

@@ -45,7 +45,12 @@ def _fake_modules():
     Select.__module__, Select.__qualname__ = "chumpy.reordering", "Select"
     csc_matrix.__module__, csc_matrix.__qualname__ = "scipy.sparse.csc", "csc_matrix"
     ch.Ch, reordering.Select, csc.csc_matrix = Ch, Select, csc_matrix
-    return {"chumpy": types.ModuleType("chumpy"), "chumpy.ch": ch, "chumpy.reordering": reordering, "scipy.sparse.csc": csc}
+    return {
+        "chumpy": types.ModuleType("chumpy"),
+        "chumpy.ch": ch,
+        "chumpy.reordering": reordering,
+        "scipy.sparse.csc": csc,
+    }
 
 
 class _Py2Pickler(pickle._Pickler):
@@ -129,15 +134,23 @@ def write_synthetic_mano(path, side: str = "right", seed: int = 0) -> dict[str, 
     saved = {k: sys.modules.get(k) for k in mods}
     sys.modules.update(mods)
     try:
-        ch_cls, select_cls, csc_cls = mods["chumpy.ch"].Ch, mods["chumpy.reordering"].Select, mods["scipy.sparse.csc"].csc_matrix
+        ch_cls, select_cls, csc_cls = (
+            mods["chumpy.ch"].Ch,
+            mods["chumpy.reordering"].Select,
+            mods["scipy.sparse.csc"].csc_matrix,
+        )
         obj = dict(arrays)
         shapedirs = ch_cls()
-        shapedirs.__dict__.update(x=arrays["shapedirs"], _dirty_vars=set(), _itr=None, _make_dense=False, _make_sparse=False)
+        shapedirs.__dict__.update(
+            x=arrays["shapedirs"], _dirty_vars=set(), _itr=None, _make_dense=False, _make_sparse=False
+        )
         obj["shapedirs"] = shapedirs
         flat = ch_cls()
         flat.__dict__.update(x=arrays["v_template"].ravel(), _dirty_vars=set(), _itr=None)
         v_template = select_cls()
-        v_template.__dict__.update(a=flat, idxs=np.arange(arrays["v_template"].size), preferred_shape=arrays["v_template"].shape)
+        v_template.__dict__.update(
+            a=flat, idxs=np.arange(arrays["v_template"].size), preferred_shape=arrays["v_template"].shape
+        )
         obj["v_template"] = v_template
         reg = csc_cls()
         r = arrays["J_regressor"]

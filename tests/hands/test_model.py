@@ -9,7 +9,9 @@ from handshadow.hands import JOINT_NAMES, load_hand
 from handshadow.hands.kinematics import anatomical_rotations, rotations_to_anatomical
 from tests.conftest import random_pose, random_rotation
 
-FINGER_JOINTS = {f: [JOINT_NAMES.index(f"{f}{k}") for k in (1, 2, 3)] for f in ("thumb", "index", "middle", "ring", "little")}
+FINGER_JOINTS = {
+    f: [JOINT_NAMES.index(f"{f}{k}") for k in (1, 2, 3)] for f in ("thumb", "index", "middle", "ring", "little")
+}
 TIP = {"thumb": 4, "index": 8, "middle": 12, "ring": 16, "little": 20}
 
 
@@ -100,3 +102,16 @@ def test_anatomical_angles_round_trip(hands64, rng):
 def test_bad_pose_shape_is_refused(hands64):
     with pytest.raises(ValueError, match="shape"):
         hands64["right"](torch.zeros(1, 16, 3, dtype=torch.float64))
+
+
+def test_rodrigues_matches_roma_and_is_smooth_at_zero():
+    roma = pytest.importorskip("roma")
+    from handshadow.hands.kinematics import rotvec_to_rotmat
+
+    r = torch.randn(64, 3, dtype=torch.float64) * 2
+    r[:4] *= 1e-7  # tiny angles take the series branch
+    assert torch.allclose(rotvec_to_rotmat(r), roma.rotvec_to_rotmat(r), atol=1e-12)
+    zero = torch.zeros(1, 3, dtype=torch.float64, requires_grad=True)
+    rotvec_to_rotmat(zero).sum().backward()
+    assert torch.isfinite(zero.grad).all()
+    assert torch.autograd.gradcheck(rotvec_to_rotmat, (torch.randn(3, 3, dtype=torch.float64, requires_grad=True),))

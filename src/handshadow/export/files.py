@@ -10,8 +10,10 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
+from handshadow.errors import HandshadowError
 
-class OutputError(ValueError):
+
+class OutputError(HandshadowError):
     """The output folder cannot be used."""
 
 
@@ -34,7 +36,7 @@ class ResultFolder:
             raise OutputError(f"output folder {self.path} is not empty (use --force to overwrite)")
         self.staging = self.path.parent / f".{self.path.name}.partial-{os.getpid()}"
 
-    def __enter__(self) -> "ResultFolder":
+    def __enter__(self) -> ResultFolder:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             shutil.rmtree(self.staging, ignore_errors=True)

@@ -21,7 +21,9 @@ def round_vertices(vertices: np.ndarray) -> np.ndarray:
 def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
     """Plain OBJ (v / f lines), world frame, metres."""
     mesh = trimesh.Trimesh(vertices, faces, process=False)
-    text = trimesh.exchange.obj.export_obj(mesh, include_normals=False, include_texture=False, digits=OBJ_DIGITS, header=None)
+    text = trimesh.exchange.obj.export_obj(
+        mesh, include_normals=False, include_texture=False, digits=OBJ_DIGITS, header=None
+    )
     Path(path).write_text(f"# handshadow: {name}, world frame, metres\no {name}\n" + text)
 
 
@@ -58,7 +60,10 @@ def wall_mesh(scene: Scene, shadow: np.ndarray | None) -> trimesh.Trimesh:
         texture = np.repeat(np.asarray(shadow, np.uint8)[..., None], 3, axis=2)
         uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], float)  # glTF-style uv, v up in trimesh
         mesh.visual = trimesh.visual.TextureVisuals(
-            uv=uv, material=trimesh.visual.material.PBRMaterial(baseColorTexture=Image.fromarray(texture), metallicFactor=0.0, roughnessFactor=1.0)
+            uv=uv,
+            material=trimesh.visual.material.PBRMaterial(
+                baseColorTexture=Image.fromarray(texture), metallicFactor=0.0, roughnessFactor=1.0
+            ),
         )
     return mesh
 
@@ -71,5 +76,7 @@ def light_marker_position(scene: Scene) -> np.ndarray:
     return centre - 2.0 * d / np.linalg.norm(d)
 
 
-def write_glb(path: Path, scene: Scene, hands: list[tuple[str, np.ndarray, np.ndarray]], shadow: np.ndarray | None) -> None:
+def write_glb(
+    path: Path, scene: Scene, hands: list[tuple[str, np.ndarray, np.ndarray]], shadow: np.ndarray | None
+) -> None:
     Path(path).write_bytes(scene_trimesh(scene, hands, shadow).export(file_type="glb"))

@@ -39,10 +39,16 @@ def scene_picture(
         for p in np.asarray(rays_through, float):
             hit = _on_wall(scene, p)
             if hit is not None:
-                meshes.append(_rod(lamp if scene.light.type == "point" else p - 0.6 * np.asarray(scene.light.direction), hit, 0.0025, RAY))
+                meshes.append(
+                    _rod(
+                        lamp if scene.light.type == "point" else p - 0.6 * np.asarray(scene.light.direction),
+                        hit,
+                        0.0025,
+                        RAY,
+                    )
+                )
     centre = np.asarray(scene.image.origin) + 0.5 * np.asarray(scene.image.u) + 0.5 * np.asarray(scene.image.v)
     normal = np.asarray(scene.wall.normal, float)
-    span = float(np.linalg.norm(scene.image.v))
     depth = float((lamp - centre) @ normal)
     # Over the performer's right shoulder: lamp in front, hands in the middle, wall behind.
     up = up_dir(scene)

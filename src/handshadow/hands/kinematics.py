@@ -6,8 +6,28 @@ Conventions: rotations act on column vectors (p' = R p); a rigid transform is a 
 
 from __future__ import annotations
 
-import roma
 import torch
+
+
+def rotvec_to_rotmat(rotvec: torch.Tensor) -> torch.Tensor:
+    """Rodrigues' formula: rotation vectors (..., 3) (axis times angle, radians) -> (..., 3, 3).
+
+    Same result as ``roma.rotvec_to_rotmat`` (tests check it); written here because importing
+    roma pulls in torch._dynamo and adds about 2 s to every command's start.
+    Smooth at zero: R = I + A [r]x + B [r]x^2 with A = sin t / t, B = (1 - cos t) / t^2.
+    """
+    theta2 = (rotvec * rotvec).sum(-1, keepdim=True)[..., None]  # (..., 1, 1)
+    small = theta2 < 1e-8
+    theta = torch.sqrt(torch.where(small, torch.ones_like(theta2), theta2))
+    a = torch.where(small, 1 - theta2 / 6, torch.sin(theta) / theta)
+    b = torch.where(
+        small, 0.5 - theta2 / 24, (1 - torch.cos(theta)) / torch.where(small, torch.ones_like(theta2), theta2)
+    )
+    x, y, z = rotvec.unbind(-1)
+    zero = torch.zeros_like(x)
+    k = torch.stack([zero, -z, y, z, zero, -x, -y, x, zero], -1).reshape(rotvec.shape[:-1] + (3, 3))
+    eye = torch.eye(3, dtype=rotvec.dtype, device=rotvec.device)
+    return eye + a * k + b * (k @ k)
 
 
 def axis_angle_rotations(axes: torch.Tensor, angles_rad: torch.Tensor) -> torch.Tensor:
@@ -19,7 +39,7 @@ def axis_angle_rotations(axes: torch.Tensor, angles_rad: torch.Tensor) -> torch.
     Returns:
         (..., 3, 3) rotation matrices.
     """
-    return roma.rotvec_to_rotmat(axes * angles_rad[..., None])
+    return rotvec_to_rotmat(axes * angles_rad[..., None])
 
 
 def anatomical_rotations(angles_rad: torch.Tensor, joint_axes: torch.Tensor) -> torch.Tensor:

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse
 
+from handshadow.errors import HandshadowError
 from handshadow.hands.rig import HandRig, Side, canonicalise, check_side, fingertip_vertices
 
 # Our joint order (thumb, index, middle, ring, little) -> MANO joint index.
@@ -27,7 +28,7 @@ MANO_JOINTS = np.array([13, 14, 15, 1, 2, 3, 4, 5, 6, 10, 11, 12, 7, 8, 9])
 N_BETAS = 10
 
 
-class ManoFileError(ValueError):
+class ManoFileError(HandshadowError):
     """A MANO file that is missing, unreadable or not allowed."""
 
 
@@ -143,7 +144,16 @@ def read_mano_file(path: str | Path) -> dict:
                 raw = SafeManoUnpickler(fh, encoding="latin1").load()
     except RefusedObject as exc:
         raise ManoFileError(f"{path}: {exc}") from None
-    except (pickle.UnpicklingError, EOFError, ValueError, OSError, KeyError, TypeError, AttributeError, IndexError) as exc:
+    except (
+        pickle.UnpicklingError,
+        EOFError,
+        ValueError,
+        OSError,
+        KeyError,
+        TypeError,
+        AttributeError,
+        IndexError,
+    ) as exc:
         raise ManoFileError(f"{path} is not a readable MANO file ({exc.__class__.__name__}: {exc})") from None
     if not isinstance(raw, dict):
         raise ManoFileError(f"{path} is not a MANO model (expected a dict of arrays)")
@@ -161,7 +171,9 @@ def mano_path(mano_dir: str | Path, side: Side) -> Path:
     for suffix in (".pkl", ".npz"):
         if (mano_dir / (stem + suffix)).is_file():
             return mano_dir / (stem + suffix)
-    raise ManoFileError(f"no {stem}.pkl or {stem}.npz in {mano_dir} (MANO files must be downloaded from mano.is.tue.mpg.de)")
+    raise ManoFileError(
+        f"no {stem}.pkl or {stem}.npz in {mano_dir} (MANO files must be downloaded from mano.is.tue.mpg.de)"
+    )
 
 
 def fix_left_shapedirs(left: dict, right: dict | None) -> dict:
@@ -246,14 +258,15 @@ def mano_pose_rotations(pose45, rig: HandRig, hands_mean: np.ndarray | None = No
     thumb), as smplx/manopth take it. ``hands_mean`` (15, 3, our order) is added first, as with
     ``flat_hand_mean=False``; leave it None for ``flat_hand_mean=True``.
     """
-    import roma
     import torch
+
+    from handshadow.hands.kinematics import rotvec_to_rotmat
 
     pose = pose45.reshape(-1, 15, 3)[:, torch.as_tensor(MANO_JOINTS - 1, device=pose45.device)]
     if hands_mean is not None:
         pose = pose + torch.as_tensor(hands_mean, dtype=pose.dtype, device=pose.device)
     c = torch.as_tensor(rig.native_rotation, dtype=pose.dtype, device=pose.device)
-    return c @ roma.rotvec_to_rotmat(pose) @ c.T
+    return c @ rotvec_to_rotmat(pose) @ c.T
 
 
 def _betas(shape, n: int) -> np.ndarray:

@@ -106,9 +106,7 @@ def hand_frame(
     return np.stack([x, y, z])
 
 
-def anatomical_axes(
-    side: Side, joint_heads: np.ndarray, joint_children: np.ndarray
-) -> np.ndarray:
+def anatomical_axes(side: Side, joint_heads: np.ndarray, joint_children: np.ndarray) -> np.ndarray:
     """Per-joint [twist, spread, bend] unit axes (15, 3, 3), rows, in the hand frame.
 
     Args:

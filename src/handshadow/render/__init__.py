@@ -40,7 +40,7 @@ class ShadowRenderer:
         offsets = [sum(num_vertices[:i]) for i in range(len(faces))]
         self.topology = MeshTopology.from_faces(torch.cat([f + o for f, o in zip(faces, offsets)]))
 
-    def to(self, device: torch.device | str) -> "ShadowRenderer":
+    def to(self, device: torch.device | str) -> ShadowRenderer:
         self.topology = self.topology.to(device)
         return self
 

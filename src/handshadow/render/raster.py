@@ -102,3 +102,67 @@ def fragments(spans: Spans) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, t
     first = torch.cumsum(length, 0) - length
     col = spans.col_start[index] + torch.arange(index.shape[0], device=length.device) - first[index]
     return spans.batch[index], spans.face[index], spans.row[index], col
+
+
+def points_covered(
+    tri_xy: torch.Tensor, keep: torch.Tensor | None, batch: torch.Tensor, points: torch.Tensor, cell_px: float = 2.0
+) -> torch.Tensor:
+    """Whether each point lies in (or on) any triangle of its batch item.
+
+    Exact point-in-triangle tests against the triangles whose bounding boxes share the point's
+    cell of a uniform grid (``cell_px`` pixels), so the cost grows with the triangles near the
+    points, not with the image.
+
+    Args:
+        tri_xy: (B, F, 3, 2) triangles in pixel coordinates.
+        keep: optional (B, F) bool, the triangles to test against.
+        batch: (S,) long, the batch item of each point.
+        points: (S, 2) pixel coordinates.
+    Returns:
+        (S,) bool.
+    """
+    n_batch, n_faces = tri_xy.shape[:2]
+    tri = tri_xy.detach().reshape(-1, 3, 2)
+    index = (
+        torch.arange(tri.shape[0], device=tri.device)
+        if keep is None
+        else torch.nonzero(keep.reshape(-1), as_tuple=True)[0]
+    )
+    tri = tri.index_select(0, index)
+    tri_batch = torch.div(index, n_faces, rounding_mode="floor")
+    # Grid over the points' extent (plus one cell), triangles clamped into it.
+    lo_pt = torch.floor(points.amin(0) / cell_px) - 1 if len(points) else points.new_zeros(2)
+    hi_pt = torch.floor(points.amax(0) / cell_px) + 1 if len(points) else points.new_zeros(2)
+    size = (hi_pt - lo_pt + 1).long()
+    t_lo = (torch.floor(tri.amin(1) / cell_px) - lo_pt).clamp(min=0)
+    t_hi = (torch.floor(tri.amax(1) / cell_px) - lo_pt).minimum(size - 1)
+    extent = (t_hi - t_lo + 1).clamp(min=0).long()  # (N, 2): cells in x and y
+    n_cells = extent[:, 0] * extent[:, 1]
+    tri_rep = torch.repeat_interleave(torch.arange(tri.shape[0], device=tri.device), n_cells)
+    k = torch.arange(tri_rep.shape[0], device=tri.device) - (torch.cumsum(n_cells, 0) - n_cells).index_select(
+        0, tri_rep
+    )
+    ex = extent[:, 0].index_select(0, tri_rep)
+    cx = t_lo[:, 0].long().index_select(0, tri_rep) + k % ex
+    cy = t_lo[:, 1].long().index_select(0, tri_rep) + torch.div(k, ex, rounding_mode="floor")
+    key = (tri_batch.index_select(0, tri_rep) * size[1] + cy) * size[0] + cx
+    key, order = torch.sort(key)
+    tri_sorted = tri_rep.index_select(0, order)
+
+    q = (torch.floor(points / cell_px) - lo_pt).long()
+    q_key = (batch * size[1] + q[:, 1]) * size[0] + q[:, 0]
+    start = torch.searchsorted(key, q_key)
+    count = torch.searchsorted(key, q_key, right=True) - start
+    pt_rep = torch.repeat_interleave(torch.arange(points.shape[0], device=points.device), count)
+    j = (
+        start.index_select(0, pt_rep)
+        + torch.arange(pt_rep.shape[0], device=points.device)
+        - (torch.cumsum(count, 0) - count).index_select(0, pt_rep)
+    )
+    t = tri.index_select(0, tri_sorted.index_select(0, j))  # (P, 3, 2)
+    p = points.index_select(0, pt_rep)[:, None, :]
+    a, b = t, t.roll(-1, 1)
+    side = (b[..., 0] - a[..., 0]) * (p[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (p[..., 0] - a[..., 0])
+    inside = ((side >= 0).all(1) | (side <= 0).all(1)).to(torch.int32)
+    hits = torch.zeros(points.shape[0], dtype=torch.int32, device=points.device).index_add_(0, pt_rep, inside)
+    return hits > 0

@@ -24,8 +24,6 @@ import torch
 
 from handshadow.render.raster import coverage, rasterize_spans
 
-SAMPLE_SPACING_PX = 1.0  # distance between gradient samples along an edge
-
 
 @dataclasses.dataclass(frozen=True)
 class MeshTopology:
@@ -43,7 +41,7 @@ class MeshTopology:
     closed: bool
 
     @staticmethod
-    def from_faces(faces: torch.Tensor) -> "MeshTopology":
+    def from_faces(faces: torch.Tensor) -> MeshTopology:
         f = faces.detach().cpu().numpy().astype(np.int64)
         directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
         face_of = np.tile(np.arange(len(f)), 3)
@@ -66,8 +64,10 @@ class MeshTopology:
             closed=bool((edge_faces[:, 1] >= 0).all()),
         )
 
-    def to(self, device: torch.device | str) -> "MeshTopology":
-        return MeshTopology(self.faces.to(device), self.edge_faces.to(device), self.edge_corners.to(device), self.closed)
+    def to(self, device: torch.device | str) -> MeshTopology:
+        return MeshTopology(
+            self.faces.to(device), self.edge_faces.to(device), self.edge_corners.to(device), self.closed
+        )
 
 
 def shadow_mask(points_xy: torch.Tensor, topology: MeshTopology, height: int, width: int) -> torch.Tensor:
@@ -136,7 +136,16 @@ def outline_gradient(
     grad_mask: torch.Tensor,
     facing: torch.Tensor,
 ) -> torch.Tensor:
-    """dL/d(points_xy) (B, V, 2) from dL/d(mask) (B, H, W) by edge sampling at the outline.
+    """dL/d(points_xy) (B, V, 2) from dL/d(mask) (B, H, W) at the outline.
+
+    The outline passes between two neighbouring pixel centres whose mask values differ. Contour
+    edges are cut with the lines through pixel centres (rows y = i + 0.5 and columns
+    x = j + 0.5). For each pair of differing neighbours the crossing nearest the lit centre is
+    the outline there (hidden contours and folds of the contour lie behind it and lose). A
+    winning crossing carries gradient only on its edge's dominant family (steep edges on rows,
+    shallow ones on columns), where each crossing stands for one pixel of the edge's extent. Moving that crossing by dx toward the lit centre
+    turns an area dx x 1 into shadow; the loss changes by the mean of its gradient at the two
+    centres (for L2 against a binary target, exactly the cost of flipping a pixel).
 
     Args: points_xy (B, V, 2); mask (B, H, W) bool, the forward result; grad_mask (B, H, W);
     facing (B, F) bool from :func:`front_facing`.
@@ -145,46 +154,84 @@ def outline_gradient(
     n_vertices = points_xy.shape[1]
     dtype = points_xy.dtype
     b, e = contour_edges(facing, topology)
-    corners = topology.edge_corners[e]  # (M, 3): a, c, third
+    corners = topology.edge_corners[e]  # (M, 3): a, c, third corner of the first face
     pts = points_xy.reshape(-1, 2).index_select(0, ((b * n_vertices)[:, None] + corners).reshape(-1)).view(-1, 3, 2)
     a, c, o = pts[:, 0], pts[:, 1], pts[:, 2]
-    along = c - a
-    length = along.norm(dim=1)
-    normal = torch.stack([along[:, 1], -along[:, 0]], 1) / length.clamp(min=1e-12)[:, None]
-    # Outward: away from the third corner of the edge's first face.
-    normal = normal * torch.where(((o - a) * normal).sum(1) > 0, -1.0, 1.0).to(dtype)[:, None]
-
-    n_samples = torch.ceil(length / SAMPLE_SPACING_PX).clamp_(max=4 * max(height, width)).long()
-    edge_of = torch.repeat_interleave(torch.arange(len(length), device=length.device), n_samples)
-    first = torch.cumsum(n_samples, 0) - n_samples
-    k = torch.arange(edge_of.shape[0], device=length.device) - first.index_select(0, edge_of)
-    per_edge = torch.cat([a, along, normal, (length / n_samples.clamp(min=1))[:, None], n_samples[:, None].to(dtype)], 1)
-    q = per_edge.index_select(0, edge_of)  # (S, 8)
-    t = (k.to(dtype) + 0.5) / q[:, 7]
-    nrm = q[:, 4:6]
-    pos = q[:, 0:2] + t[:, None] * q[:, 2:4]
-    # Step far enough (in the max-norm) that the pixel centres probed lie on either side.
-    offset = (0.5 * (nrm.abs().sum(1) + 1e-3))[:, None] * nrm
+    d = c - a
+    # Cut every edge with both families of centre lines: rows (v = y, pairs side by side) and
+    # columns (v = x, pairs one above the other). All crossings compete for the outline of a
+    # pair; only crossings of the edge's dominant family (steep: rows, shallow: columns) carry
+    # the gradient, so each stretch of outline counts once.
+    n_edges = d.shape[0]
+    steep = d[:, 1].abs() >= d[:, 0].abs()
+    major = torch.cat(
+        [
+            torch.ones(n_edges, dtype=torch.long, device=d.device),
+            torch.zeros(n_edges, dtype=torch.long, device=d.device),
+        ]
+    )
+    dominant = torch.cat([steep, ~steep])
+    a, d, o, b, corners = a.repeat(2, 1), d.repeat(2, 1), o.repeat(2, 1), b.repeat(2), corners.repeat(2, 1)
+    minor = 1 - major
+    a_u, a_v = a.gather(1, minor[:, None])[:, 0], a.gather(1, major[:, None])[:, 0]
+    d_u, d_v = d.gather(1, minor[:, None])[:, 0], d.gather(1, major[:, None])[:, 0]
+    rows_family = major == 1
+    # Outward normal's sign along u (the pair axis): away from the edge's own face.
+    side = d[:, 0] * (o[:, 1] - a[:, 1]) - d[:, 1] * (o[:, 0] - a[:, 0])  # third corner's side
+    out_u = torch.where(rows_family, 1.0, -1.0).to(dtype) * torch.sign(side) * torch.sign(d_v)
+    # Lines v = k + 0.5 with v in [min, max) of the edge: k = ceil(min - .5) .. ceil(max - .5) - 1.
+    v_lo = torch.minimum(a_v, a_v + d_v)
+    v_hi = torch.maximum(a_v, a_v + d_v)
+    extent = torch.where(rows_family, height, width)
+    k_lo = torch.ceil(v_lo - 0.5).clamp(min=0)
+    k_hi = torch.minimum(torch.ceil(v_hi - 0.5) - 1, (extent - 1).to(dtype))
+    count = (k_hi - k_lo + 1).clamp(min=0).long()
+    edge_of = torch.repeat_interleave(torch.arange(len(count), device=count.device), count)
+    first = torch.cumsum(count, 0) - count
+    k = k_lo.index_select(0, edge_of) + (
+        torch.arange(edge_of.shape[0], device=count.device) - first.index_select(0, edge_of)
+    ).to(dtype)
+    per_edge = torch.stack([a_u, a_v, d_u, d_v, out_u, major.to(dtype), dominant.to(dtype)], 1).index_select(0, edge_of)
+    t = (k + 0.5 - per_edge[:, 1]) / per_edge[:, 3]  # position along the edge, in [0, 1)
+    cross_u = per_edge[:, 0] + t * per_edge[:, 2]
+    lo = torch.floor(cross_u - 0.5)  # the pair of centres lo + .5 <= cross_u < lo + 1.5
+    on_rows = per_edge[:, 5] > 0  # crossing a row line: a side-by-side pair
     bs = b.index_select(0, edge_of)
+    k_long = k.long()
+    lo_long = lo.long()
+    row_lo = torch.where(on_rows, k_long, lo_long)
+    col_lo = torch.where(on_rows, lo_long, k_long)
+    row_hi = torch.where(on_rows, k_long, lo_long + 1)
+    col_hi = torch.where(on_rows, lo_long + 1, k_long)
     values = torch.stack([mask.to(dtype), grad_mask], -1).reshape(-1, 2)
-    out_v = _lookup(values, bs, pos + offset, height, width)
-    in_v = _lookup(values, bs, pos - offset, height, width)
-    # Near the outline when one probe is lit and the other in shadow. The normal is the edge's
-    # own (away from its faces), so where the contour folds back within a pixel of the outline
-    # (three contour edges side by side) the middle one pushes inward and the fold counts once.
-    near_outline = (in_v[:, 0] - out_v[:, 0]).abs()
-    weight = near_outline * 0.5 * (in_v[:, 1] + out_v[:, 1]) * q[:, 6]
-    push = weight[:, None] * nrm  # (S, 2): dL per unit outward motion of the edge there
-    vertex = (bs * n_vertices)[:, None] + corners[:, :2].index_select(0, edge_of)  # (S, 2)
+    v_lo_px = _pixel_values(values, bs, row_lo, col_lo, height, width)
+    v_hi_px = _pixel_values(values, bs, row_hi, col_hi, height, width)
+    lit_is_hi = v_hi_px[:, 0] < v_lo_px[:, 0]
+    # Both centres inside the image (the shadow beyond the frame is unknown, not lit).
+    in_image = (row_lo >= 0) & (col_lo >= 0) & (row_hi < height) & (col_hi < width)
+    differ = (v_hi_px[:, 0] != v_lo_px[:, 0]) & in_image
+    toward_lit = torch.where(lit_is_hi, 1.0, -1.0).to(dtype)
+    valid = differ & (per_edge[:, 4] == toward_lit)
+    # Per pixel pair keep the crossing nearest the lit centre.
+    dist = torch.where(lit_is_hi, lo + 1.5 - cross_u, cross_u - lo - 0.5)
+    key = ((bs * (height + 1) + row_lo + 1) * (width + 1) + col_lo + 1) * 2 + on_rows.long()
+    key = torch.where(valid, key, torch.zeros_like(key))
+    best = torch.full((batch * (height + 1) * (width + 1) * 2,), float("inf"), dtype=dtype, device=points_xy.device)
+    best.scatter_reduce_(0, key, torch.where(valid, dist, torch.full_like(dist, float("inf"))), reduce="amin")
+    win = valid & (dist <= best.index_select(0, key))
+    weight = (win & (per_edge[:, 6] > 0)).to(dtype) * 0.5 * (v_lo_px[:, 1] + v_hi_px[:, 1]) * toward_lit
+    # d(cross_u)/d(a) = (1 - t) (1, -du/dv) and d/d(c) = t (...), in (u, v); back to (x, y).
+    slope = per_edge[:, 2] / per_edge[:, 3]
+    du_dv = torch.stack([torch.ones_like(slope), -slope], 1)  # (u, v) components
+    dxy = torch.where(on_rows[:, None], du_dv, du_dv.flip(1)) * weight[:, None]
+    vertex = (bs * n_vertices)[:, None] + corners[:, :2].index_select(0, edge_of)
     grad = torch.zeros_like(points_xy).view(-1, 2)
-    grad.index_add_(0, vertex.T.reshape(-1), torch.cat([push * (1 - t)[:, None], push * t[:, None]]))
+    grad.index_add_(0, vertex.T.reshape(-1), torch.cat([dxy * (1 - t)[:, None], dxy * t[:, None]]))
     return grad.view_as(points_xy)
 
 
-def _lookup(values: torch.Tensor, b: torch.Tensor, pos: torch.Tensor, height: int, width: int) -> torch.Tensor:
-    """Rows of ``values`` ((B*H*W, C)) at the pixels containing pos (S, 2); zero outside."""
-    col = torch.floor(pos[:, 0]).long()
-    row = torch.floor(pos[:, 1]).long()
+def _pixel_values(values: torch.Tensor, b, row, col, height: int, width: int) -> torch.Tensor:
+    """Rows of ``values`` ((B*H*W, C)) at pixels (row, col); zero outside the image."""
     inside = (col >= 0) & (col < width) & (row >= 0) & (row < height)
     flat = (b * height + row.clamp(0, height - 1)) * width + col.clamp(0, width - 1)
     return values.index_select(0, flat) * inside[:, None].to(values.dtype)

@@ -1,0 +1,162 @@
+"""`handshadow render`: outputs, the scene.json contract, and bad input."""
+
+import json
+import subprocess
+import sys
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import trimesh
+
+from handshadow.cli import main
+from handshadow.examples import pose_path
+
+PY = [sys.executable, "-m", "handshadow.cli"]
+
+
+def recompute_shadow(folder) -> np.ndarray:
+    """The shadow from scene.json and the OBJ files alone, in numpy, following the contract:
+    pixel (i, j) is in shadow when the segment from its centre on the wall to the light (or
+    the ray against a directional light) meets a triangle."""
+    scene = json.loads((folder / "scene.json").read_text())
+    im = scene["image"]
+    w, h = im["width"], im["height"]
+    o, u, v = (np.asarray(im[k], float) for k in ("origin", "u", "v"))
+    n = np.asarray(scene["wall"]["normal"], float)
+    w0 = np.asarray(scene["wall"]["point"], float)
+    shadow = np.zeros((h, w), bool)
+    jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    for name in scene["meshes"]:
+        verts, faces = read_obj(folder / name)
+        # Project every vertex from the light onto the wall, then into (column, row) pixels.
+        if scene["light"]["type"] == "point":
+            lamp = np.asarray(scene["light"]["position"], float)
+            s = ((w0 - lamp) @ n) / ((verts - lamp) @ n)
+            on_wall = lamp + (verts - lamp) * s[:, None]
+        else:
+            d = np.asarray(scene["light"]["direction"], float)
+            on_wall = verts + d * (((w0 - verts) @ n) / (d @ n))[:, None]
+        px = np.stack([(on_wall - o) @ u / (u @ u) * w, (on_wall - o) @ v / (v @ v) * h], 1)
+        for tri in px[faces]:
+            x0, y0 = np.floor(tri.min(0)).astype(int)
+            x1, y1 = np.ceil(tri.max(0)).astype(int)
+            x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+            if x0 >= x1 or y0 >= y1:
+                continue
+            p = np.stack([jj[y0:y1, x0:x1], ii[y0:y1, x0:x1]], -1)
+            e = [(tri[(k + 1) % 3] - tri[k]) for k in range(3)]
+            sides = [e[k][0] * (p[..., 1] - tri[k][1]) - e[k][1] * (p[..., 0] - tri[k][0]) for k in range(3)]
+            inside = (np.min(sides, 0) >= 0) | (np.max(sides, 0) <= 0)
+            shadow[y0:y1, x0:x1] |= inside
+    return shadow
+
+
+def read_obj(path):
+    verts, faces = [], []
+    for line in path.read_text().splitlines():
+        parts = line.split()
+        if parts and parts[0] == "v":
+            verts.append([float(x) for x in parts[1:4]])
+        elif parts and parts[0] == "f":
+            faces.append([int(x.split("/")[0]) - 1 for x in parts[1:4]])
+    return np.asarray(verts), np.asarray(faces)
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    out = tmp_path_factory.mktemp("render") / "two"
+    assert main(["render", "two-hands", "--out", str(out)]) == 0
+    return out
+
+
+def test_render_writes_every_output(rendered):
+    names = {p.name for p in rendered.iterdir()}
+    assert {"shadow.png", "scene.json", "left.obj", "right.obj", "hands.glb", "scene.png", "pose.json"} <= names
+    shadow = iio.imread(rendered / "shadow.png")
+    assert shadow.shape == (256, 256) and set(np.unique(shadow)) == {0, 255}
+    picture = iio.imread(rendered / "scene.png")
+    assert picture.shape[2] == 3 and picture.std() > 10  # a real picture, not a blank
+    glb = trimesh.load(rendered / "hands.glb")
+    assert {"right_hand", "left_hand", "wall", "light"} <= set(glb.geometry)
+    for side in ("left", "right"):
+        mesh = trimesh.load(rendered / f"{side}.obj", process=False)
+        assert mesh.is_watertight  # hand and forearm, one closed surface
+
+
+def test_scene_json_and_meshes_reproduce_the_shadow(rendered):
+    shadow = iio.imread(rendered / "shadow.png") < 128
+    again = recompute_shadow(rendered)
+    assert shadow.sum() > 1000
+    assert (shadow != again).sum() <= 2  # identical up to pixel centres lying on an edge
+
+
+def test_directional_light_scene_reproduces_too(tmp_path):
+    pose = json.loads(pose_path("open-hand").read_text())
+    from handshadow.scene import Scene
+
+    pose["scene"] = Scene.default(160, 120, light="directional").to_json()
+    pose["hands"][0]["translation"] = [0.0, -0.1, 0.5]
+    (tmp_path / "p.json").write_text(json.dumps(pose))
+    assert main(["render", str(tmp_path / "p.json"), "--out", str(tmp_path / "out")]) == 0
+    shadow = iio.imread(tmp_path / "out" / "shadow.png") < 128
+    assert shadow.shape == (120, 160) and shadow.sum() > 500
+    assert (shadow != recompute_shadow(tmp_path / "out")).sum() <= 2
+
+
+def test_pose_file_round_trips(rendered, tmp_path):
+    assert main(["render", str(rendered / "pose.json"), "--out", str(tmp_path / "again")]) == 0
+    assert np.array_equal(iio.imread(rendered / "shadow.png"), iio.imread(tmp_path / "again" / "shadow.png"))
+
+
+BAD_POSES = {
+    "not-json": "{this is not json",
+    "no-hands": json.dumps({"hands": []}),
+    "bad-side": json.dumps({"hands": [{"side": "middle", "translation": [0, 0, 1]}]}),
+    "bad-shape": json.dumps({"hands": [{"side": "right", "pose_deg": [[0, 0]], "translation": [0, 0, 1]}]}),
+    "not-rotation": json.dumps(
+        {"hands": [{"side": "right", "rotation": [[2, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 1]}]}
+    ),
+    "behind-wall": json.dumps({"hands": [{"side": "right", "translation": [0, 0, -0.5]}]}),
+    "at-the-lamp": json.dumps({"hands": [{"side": "right", "translation": [0, 0, 1.95]}]}),
+    "bad-scene": json.dumps(
+        {"scene": {"light": {"type": "laser"}}, "hands": [{"side": "right", "translation": [0, 0, 1]}]}
+    ),
+    "two-rights": json.dumps(
+        {"hands": [{"side": "right", "translation": [0, 0, 1]}, {"side": "right", "translation": [0.1, 0, 1]}]}
+    ),
+    "mano-without-dir": json.dumps({"hands": [{"side": "right", "model": "mano", "translation": [0, 0, 1]}]}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_POSES))
+def test_bad_pose_files_fail_cleanly(tmp_path, name):
+    path = tmp_path / f"{name}.json"
+    path.write_text(BAD_POSES[name])
+    out = tmp_path / "out"
+    res = subprocess.run(PY + ["render", str(path), "--out", str(out)], capture_output=True, text=True)
+    assert res.returncode == 2
+    assert res.stderr.startswith("handshadow: error: ") and res.stderr.count("\n") == 1, res.stderr
+    assert "Traceback" not in res.stderr
+    assert not out.exists()  # nothing half-written
+    assert not any(p.name.startswith(".out.partial") for p in tmp_path.iterdir())
+
+
+def test_missing_pose_file_and_missing_mano_files(tmp_path):
+    res = subprocess.run(
+        PY + ["render", str(tmp_path / "nope.json"), "--out", str(tmp_path / "o")], capture_output=True, text=True
+    )
+    assert res.returncode == 2 and "not found" in res.stderr
+    pose = {"hands": [{"side": "left", "model": "mano", "translation": [0, 0, 1]}]}
+    (tmp_path / "m.json").write_text(json.dumps(pose))
+    res = subprocess.run(
+        PY + ["render", str(tmp_path / "m.json"), "--out", str(tmp_path / "o"), "--mano-dir", str(tmp_path)],
+        capture_output=True,
+        text=True,
+    )
+    assert res.returncode == 2 and "MANO_LEFT.pkl" in res.stderr and res.stderr.count("\n") == 1
+
+
+def test_non_empty_output_needs_force(rendered):
+    res = subprocess.run(PY + ["render", "two-hands", "--out", str(rendered)], capture_output=True, text=True)
+    assert res.returncode == 2 and "--force" in res.stderr
