@@ -111,7 +111,36 @@ class Scene:
             return 0.0, float((np.asarray(self.light.position) - np.asarray(self.wall.point)) @ n)
         return 0.0, math.inf
 
-    def project(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def projection_matrix(self) -> np.ndarray:
+        """(4, 4) matrix M mapping a world point p to (x', y', w', h) = M [p, 1], with the pixel
+        coordinates (x'/w', y'/w') of its shadow and its height h above the wall (metres).
+
+        Point light L, wall n . q = c: the ray L + s (p - L) meets the wall where
+        s = (c - n.L) / n.(p - L), so both pixel coordinates are ratios of affine functions of
+        p with the common denominator w' = n.(p - L). A directional light gives w' = 1.
+        """
+        n = np.asarray(self.wall.normal, float)
+        c = float(n @ np.asarray(self.wall.point, float))
+        o, u, v = (np.asarray(a, float) for a in (self.image.origin, self.image.u, self.image.v))
+        scaled = [u / (u @ u) * self.image.width, v / (v @ v) * self.image.height]
+        m = np.zeros((4, 4))
+        if self.light.type == "point":
+            lamp = np.asarray(self.light.position, float)
+            k = c - n @ lamp
+            for row, a in enumerate(scaled):  # a . (L - o) w' + k a . (p - L)
+                m[row, :3] = (a @ (lamp - o)) * n + k * a
+                m[row, 3] = -(a @ (lamp - o)) * (n @ lamp) - k * (a @ lamp)
+            m[2, :3], m[2, 3] = n, -(n @ lamp)
+        else:
+            d = np.asarray(self.light.direction, float)
+            for row, a in enumerate(scaled):  # a . (p + d (c - n.p) / n.d - o)
+                m[row, :3] = a - (a @ d) / (n @ d) * n
+                m[row, 3] = (a @ d) * c / (n @ d) - a @ o
+            m[2, 3] = 1.0
+        m[3, :3], m[3, 3] = n, -c
+        return m
+
+    def project(self, points: "torch.Tensor") -> tuple["torch.Tensor", "torch.Tensor"]:
         """Project points from the light onto the wall, in continuous pixel coordinates.
 
         Args:
@@ -124,33 +153,9 @@ class Scene:
         """
         import torch
 
-        t = dict(dtype=points.dtype, device=points.device)
-        n = torch.as_tensor(self.wall.normal, **t)
-        w0 = torch.as_tensor(self.wall.point, **t)
-        height = (points - w0) @ n
-        if self.light.type == "point":
-            lamp = torch.as_tensor(self.light.position, **t)
-            lamp_h = (lamp - w0) @ n
-            # Ray lamp -> p meets the wall at lamp + (p - lamp) * lamp_h / (lamp_h - height).
-            scale = lamp_h / (lamp_h - height)
-            on_wall = lamp + (points - lamp) * scale[..., None]
-        else:
-            d = torch.as_tensor(self.light.direction, **t)
-            on_wall = points + d * (-height / (d @ n))[..., None]
-        return self.wall_to_pixels(on_wall), height
-
-    def wall_to_pixels(self, on_wall: torch.Tensor) -> torch.Tensor:
-        """(..., 3) points on the wall -> (..., 2) continuous (column, row) pixel coordinates."""
-        import torch
-
-        t = dict(dtype=on_wall.dtype, device=on_wall.device)
-        o = torch.as_tensor(self.image.origin, **t)
-        u = torch.as_tensor(self.image.u, **t)
-        v = torch.as_tensor(self.image.v, **t)
-        rel = on_wall - o
-        x = rel @ u / (u @ u) * self.image.width
-        y = rel @ v / (v @ v) * self.image.height
-        return torch.stack([x, y], dim=-1)
+        m = torch.as_tensor(self.projection_matrix(), dtype=points.dtype, device=points.device)
+        out = points @ m[:, :3].T + m[:, 3]
+        return out[..., :2] / out[..., 2:3], out[..., 3]
 
     def pixel_size_m(self) -> float:
         """Edge length of one pixel on the wall, metres (pixels are square by construction)."""

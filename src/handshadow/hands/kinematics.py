@@ -6,6 +6,8 @@ Conventions: rotations act on column vectors (p' = R p); a rigid transform is a 
 
 from __future__ import annotations
 
+import functools
+
 import torch
 
 
@@ -86,12 +88,13 @@ def forward_kinematics(
 
     Bone k rotates about its rest head h_k by its own rotation R_k (identity for bones that
     are not articulated) after its parent: G_k = G_parent(k) o [x -> R_k (x - h_k) + h_k].
+    Bones are composed level by level (all bones of one depth at once).
 
     Args:
         joint_rotations: (B, 15, 3, 3) rotations of the articulated bones.
         joint_bones: (15,) long, the bone index of each articulated joint.
         bone_heads: (K, 3) rest heads.
-        bone_parents: K parent indices, -1 for roots; parents come before children.
+        bone_parents: K parent indices, -1 for roots.
     Returns:
         rotations (B, K, 3, 3) and translations (B, K, 3) of the bone transforms.
     """
@@ -102,17 +105,27 @@ def forward_kinematics(
     local[:, joint_bones] = joint_rotations
     # Local transform about the head: x -> R (x - h) + h, i.e. t = h - R h.
     local_t = bone_heads - (local @ bone_heads[..., None])[..., 0]
-    rots: list[torch.Tensor] = []
-    trans: list[torch.Tensor] = []
-    for k, parent in enumerate(bone_parents):
-        if parent < 0:
-            rots.append(local[:, k])
-            trans.append(local_t[:, k])
-        else:
-            rp, tp = rots[parent], trans[parent]
-            rots.append(rp @ local[:, k])
-            trans.append((rp @ local_t[:, k, :, None])[..., 0] + tp)
-    return torch.stack(rots, 1), torch.stack(trans, 1)
+    rots, trans = local.clone(), local_t.clone()
+    for level, parents in _levels(tuple(bone_parents)):
+        idx = torch.as_tensor(level, device=local.device)
+        par = torch.as_tensor(parents, device=local.device)
+        rp, tp = rots[:, par], trans[:, par]
+        rots[:, idx] = rp @ local[:, idx]
+        trans[:, idx] = (rp @ local_t[:, idx, :, None])[..., 0] + tp
+    return rots, trans
+
+
+@functools.lru_cache(maxsize=8)
+def _levels(parents: tuple[int, ...]) -> list[tuple[list[int], list[int]]]:
+    """Bones grouped by depth below the roots (roots excluded): [(bones, their parents)]."""
+    depth = {}
+    for k, p in enumerate(parents):
+        depth[k] = 0 if p < 0 else depth[p] + 1  # parents come before children
+    levels = []
+    for d in range(1, max(depth.values(), default=0) + 1):
+        bones = [k for k in range(len(parents)) if depth[k] == d]
+        levels.append((bones, [parents[k] for k in bones]))
+    return levels
 
 
 def linear_blend_skinning(

@@ -16,16 +16,26 @@ import torch
 
 @dataclasses.dataclass(frozen=True)
 class Spans:
-    """Row spans of triangles; N spans, each a run of covered pixels in one row.
+    """Row spans of triangles; N spans, each a run of covered pixels in one row (possibly
+    empty: col_end == col_start).
 
-    batch, face, row: (N,) long; col_start, col_end: (N,) long, columns [start, end) covered.
+    triangle: (N,) long, index into the flattened (B * F) triangles; row: (N,) long;
+    col_start, col_end: (N,) long, columns [start, end) covered; faces_per_batch: F.
     """
 
-    batch: torch.Tensor
-    face: torch.Tensor
+    triangle: torch.Tensor
     row: torch.Tensor
     col_start: torch.Tensor
     col_end: torch.Tensor
+    faces_per_batch: int
+
+    @property
+    def batch(self) -> torch.Tensor:
+        return torch.div(self.triangle, self.faces_per_batch, rounding_mode="floor")
+
+    @property
+    def face(self) -> torch.Tensor:
+        return self.triangle % self.faces_per_batch
 
 
 def rasterize_spans(tri_xy: torch.Tensor, height: int, width: int, keep: torch.Tensor | None = None) -> Spans:
@@ -45,50 +55,41 @@ def rasterize_spans(tri_xy: torch.Tensor, height: int, width: int, keep: torch.T
     if keep is not None:
         index = torch.nonzero(keep.reshape(-1), as_tuple=True)[0]
         tri = tri.index_select(0, index)
-    x, y = tri[:, 0::2], tri[:, 1::2]
-    # Rows whose centre line y = i + 0.5 meets the triangle: ceil(ymin - .5) .. floor(ymax - .5).
-    ymin, ymax = torch.aminmax(y, dim=1)
-    row_lo = torch.ceil(ymin - 0.5).clamp_(min=0)
-    row_hi = torch.floor(ymax - 0.5).clamp_(max=height - 1)
+    # Corners sorted by row: y0 <= y1 <= y2. A row's span runs between the long edge (0-2) and
+    # the short edge beside it (0-1 above y1, 1-2 below).
+    y, order = tri[:, 1::2].sort(dim=1)
+    x = tri[:, 0::2].gather(1, order)
+    dy = y[:, [2, 1, 2]] - y[:, [0, 0, 1]]
+    dx = x[:, [2, 1, 2]] - x[:, [0, 0, 1]]
+    slope = dx / torch.where(dy > 0, dy, torch.ones_like(dy))  # 0-2, 0-1, 1-2; flat edges unused
+    # Rows whose centre line y = i + 0.5 meets the triangle: ceil(y0 - .5) .. floor(y2 - .5).
+    row_lo = torch.ceil(y[:, 0] - 0.5).clamp_(min=0)
+    row_hi = torch.floor(y[:, 2] - 0.5).clamp_(max=height - 1)
     count = (row_hi - row_lo + 1).clamp_(min=0).long()
-    # Per edge (0-1, 1-2, 2-0): start x, start y, slope dx/dy, and its y extent; horizontal
-    # edges get an empty extent (the two other edges give the span's ends).
-    xb, yb = x.roll(-1, 1), y.roll(-1, 1)
-    flat = y == yb
-    slope = (xb - x) / torch.where(flat, torch.ones_like(y), yb - y)
-    lo = torch.where(flat, torch.full_like(y, float("inf")), torch.minimum(y, yb))
-    table = torch.cat([x, y, slope, lo, torch.maximum(y, yb), row_lo[:, None]], dim=1)  # (T, 16)
+    table = torch.cat([x[:, :2], y[:, :2], slope, row_lo[:, None]], dim=1)  # (T, 8)
 
     tri_index = torch.repeat_interleave(torch.arange(tri.shape[0], device=tri.device), count)
     first = torch.cumsum(count, 0) - count
     step = torch.arange(tri_index.shape[0], device=tri.device) - first.index_select(0, tri_index)
-    t = table.index_select(0, tri_index)  # (N, 16)
-    row = t[:, 15] + step.to(t.dtype)
-    yc = (row + 0.5)[:, None]
-    crosses = (t[:, 9:12] <= yc) & (yc <= t[:, 12:15])
-    xc = t[:, 0:3] + (yc - t[:, 3:6]) * t[:, 6:9]
-    x_left = torch.where(crosses, xc, float("inf")).amin(1)
-    x_right = torch.where(crosses, xc, float("-inf")).amax(1)
-    col_start = torch.ceil(x_left - 0.5).clamp_(min=0)
-    col_end = (torch.floor(x_right - 0.5) + 1).clamp_(max=width)
-    nonempty = col_start < col_end
-    tri_index = tri_index[nonempty]
+    t = table.index_select(0, tri_index)  # (N, 8): x0 x1 y0 y1 s02 s01 s12 row_lo
+    row = t[:, 7] + step.to(t.dtype)
+    yc = row + 0.5
+    x_long = t[:, 0] + (yc - t[:, 2]) * t[:, 4]
+    x_short = torch.where(yc < t[:, 3], t[:, 0] + (yc - t[:, 2]) * t[:, 5], t[:, 1] + (yc - t[:, 3]) * t[:, 6])
+    x_left = torch.minimum(x_long, x_short)
+    x_right = torch.maximum(x_long, x_short)
+    col_start = torch.ceil(x_left - 0.5).clamp_(min=0, max=width)
+    col_end = torch.maximum(torch.floor(x_right - 0.5) + 1, col_start).clamp_(max=width)
     if index is not None:
         tri_index = index.index_select(0, tri_index)
-    return Spans(
-        batch=torch.div(tri_index, n_faces, rounding_mode="floor"),
-        face=tri_index % n_faces,
-        row=row[nonempty].long(),
-        col_start=col_start[nonempty].long(),
-        col_end=col_end[nonempty].long(),
-    )
+    return Spans(tri_index, row.long(), col_start.long(), col_end.long(), n_faces)
 
 
 def coverage(spans: Spans, batch: int, height: int, width: int) -> torch.Tensor:
     """(B, H, W) bool: pixels covered by at least one span."""
     device = spans.row.device
     diff = torch.zeros(batch * height * (width + 1), dtype=torch.int32, device=device)
-    base = (spans.batch * height + spans.row) * (width + 1)
+    base = (spans.batch * height + spans.row) * (width + 1)  # empty spans add +1 and -1 at one place
     ones = torch.ones_like(base, dtype=torch.int32)
     diff.index_add_(0, torch.cat([base + spans.col_start, base + spans.col_end]), torch.cat([ones, -ones]))
     counts = torch.cumsum(diff.view(batch, height, width + 1), dim=2)[..., :width]
@@ -97,7 +98,7 @@ def coverage(spans: Spans, batch: int, height: int, width: int) -> torch.Tensor:
 
 def fragments(spans: Spans) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Expand spans into per-pixel fragments: (batch, face, row, col), each (M,) long."""
-    length = spans.col_end - spans.col_start
+    length = spans.col_end - spans.col_start  # empty spans expand to nothing
     index = torch.repeat_interleave(torch.arange(length.shape[0], device=length.device), length)
     first = torch.cumsum(length, 0) - length
     col = spans.col_start[index] + torch.arange(index.shape[0], device=length.device) - first[index]

@@ -125,7 +125,7 @@ def contour_edges(facing: torch.Tensor, topology: MeshTopology) -> tuple[torch.T
     always can. Args: facing (B, F) bool. Returns (batch, edge) index pairs, each (M,) long.
     """
     f0, f1 = topology.edge_faces[:, 0], topology.edge_faces[:, 1]
-    candidate = (facing[:, f0] != facing[:, f1.clamp(min=0)]) | (f1 < 0)
+    candidate = (facing.index_select(1, f0) != facing.index_select(1, f1.clamp(min=0))) | (f1 < 0)
     return torch.nonzero(candidate, as_tuple=True)
 
 
@@ -143,95 +143,80 @@ def outline_gradient(
     x = j + 0.5). For each pair of differing neighbours the crossing nearest the lit centre is
     the outline there (hidden contours and folds of the contour lie behind it and lose). A
     winning crossing carries gradient only on its edge's dominant family (steep edges on rows,
-    shallow ones on columns), where each crossing stands for one pixel of the edge's extent. Moving that crossing by dx toward the lit centre
-    turns an area dx x 1 into shadow; the loss changes by the mean of its gradient at the two
-    centres (for L2 against a binary target, exactly the cost of flipping a pixel).
+    shallow ones on columns), where each crossing stands for one pixel of the edge's extent.
+    Moving it by du toward the lit centre turns an area du x 1 into shadow; the loss changes by
+    the mean of its gradient at the two centres (for L2 against a binary target, exactly the
+    cost of flipping a pixel).
 
     Args: points_xy (B, V, 2); mask (B, H, W) bool, the forward result; grad_mask (B, H, W);
     facing (B, F) bool from :func:`front_facing`.
     """
     batch, height, width = mask.shape
     n_vertices = points_xy.shape[1]
-    dtype = points_xy.dtype
+    dtype, device = points_xy.dtype, points_xy.device
     b, e = contour_edges(facing, topology)
-    corners = topology.edge_corners[e]  # (M, 3): a, c, third corner of the first face
-    pts = points_xy.reshape(-1, 2).index_select(0, ((b * n_vertices)[:, None] + corners).reshape(-1)).view(-1, 3, 2)
-    a, c, o = pts[:, 0], pts[:, 1], pts[:, 2]
-    d = c - a
-    # Cut every edge with both families of centre lines: rows (v = y, pairs side by side) and
-    # columns (v = x, pairs one above the other). All crossings compete for the outline of a
-    # pair; only crossings of the edge's dominant family (steep: rows, shallow: columns) carry
-    # the gradient, so each stretch of outline counts once.
+    corners = topology.edge_corners.index_select(0, e)  # (M, 3): a, c, third corner of the first face
+    flat_corners = (b * n_vertices)[:, None] + corners
+    pts = points_xy.reshape(-1, 2).index_select(0, flat_corners.reshape(-1)).view(-1, 3, 2)
+    a, d, o = pts[:, 0], pts[:, 1] - pts[:, 0], pts[:, 2] - pts[:, 0]
     n_edges = d.shape[0]
-    steep = d[:, 1].abs() >= d[:, 0].abs()
-    major = torch.cat(
+    # Which side the edge's own face lies on, and whether the edge is steep.
+    side = torch.sign(d[:, 0] * o[:, 1] - d[:, 1] * o[:, 0])
+    steep = (d[:, 1].abs() >= d[:, 0].abs()).to(dtype)
+    # Both families in (u, v) coordinates, v across the lines: rows (u = x, v = y), columns
+    # (u = y, v = x). out_u: the outward normal's sign along u, away from the edge's face.
+    fam = torch.cat(
         [
-            torch.ones(n_edges, dtype=torch.long, device=d.device),
-            torch.zeros(n_edges, dtype=torch.long, device=d.device),
+            torch.stack([a[:, 0], a[:, 1], d[:, 0], d[:, 1], side * torch.sign(d[:, 1]), steep], 1),
+            torch.stack([a[:, 1], a[:, 0], d[:, 1], d[:, 0], -side * torch.sign(d[:, 0]), 1 - steep], 1),
         ]
-    )
-    dominant = torch.cat([steep, ~steep])
-    a, d, o, b, corners = a.repeat(2, 1), d.repeat(2, 1), o.repeat(2, 1), b.repeat(2), corners.repeat(2, 1)
-    minor = 1 - major
-    a_u, a_v = a.gather(1, minor[:, None])[:, 0], a.gather(1, major[:, None])[:, 0]
-    d_u, d_v = d.gather(1, minor[:, None])[:, 0], d.gather(1, major[:, None])[:, 0]
-    rows_family = major == 1
-    # Outward normal's sign along u (the pair axis): away from the edge's own face.
-    side = d[:, 0] * (o[:, 1] - a[:, 1]) - d[:, 1] * (o[:, 0] - a[:, 0])  # third corner's side
-    out_u = torch.where(rows_family, 1.0, -1.0).to(dtype) * torch.sign(side) * torch.sign(d_v)
-    # Lines v = k + 0.5 with v in [min, max) of the edge: k = ceil(min - .5) .. ceil(max - .5) - 1.
-    v_lo = torch.minimum(a_v, a_v + d_v)
-    v_hi = torch.maximum(a_v, a_v + d_v)
-    extent = torch.where(rows_family, height, width)
-    k_lo = torch.ceil(v_lo - 0.5).clamp(min=0)
-    k_hi = torch.minimum(torch.ceil(v_hi - 0.5) - 1, (extent - 1).to(dtype))
-    count = (k_hi - k_lo + 1).clamp(min=0).long()
-    edge_of = torch.repeat_interleave(torch.arange(len(count), device=count.device), count)
+    )  # (2M, 6): a_u, a_v, d_u, d_v, out_u, carries gradient
+    v0 = torch.minimum(fam[:, 1], fam[:, 1] + fam[:, 3])
+    v1 = torch.maximum(fam[:, 1], fam[:, 1] + fam[:, 3])
+    extent = torch.tensor([height, width], dtype=dtype, device=device).repeat_interleave(n_edges)
+    # Lines v = k + 0.5 with v in [v0, v1): k = ceil(v0 - .5) .. ceil(v1 - .5) - 1, in the image.
+    k_lo = torch.ceil(v0 - 0.5).clamp_(min=0)
+    count = (torch.minimum(torch.ceil(v1 - 0.5), extent) - k_lo).clamp_(min=0).long()
+    cut = torch.repeat_interleave(torch.arange(2 * n_edges, device=device), count)  # crossing -> family edge
     first = torch.cumsum(count, 0) - count
-    k = k_lo.index_select(0, edge_of) + (
-        torch.arange(edge_of.shape[0], device=count.device) - first.index_select(0, edge_of)
-    ).to(dtype)
-    per_edge = torch.stack([a_u, a_v, d_u, d_v, out_u, major.to(dtype), dominant.to(dtype)], 1).index_select(0, edge_of)
-    t = (k + 0.5 - per_edge[:, 1]) / per_edge[:, 3]  # position along the edge, in [0, 1)
-    cross_u = per_edge[:, 0] + t * per_edge[:, 2]
-    lo = torch.floor(cross_u - 0.5)  # the pair of centres lo + .5 <= cross_u < lo + 1.5
-    on_rows = per_edge[:, 5] > 0  # crossing a row line: a side-by-side pair
-    bs = b.index_select(0, edge_of)
-    k_long = k.long()
-    lo_long = lo.long()
-    row_lo = torch.where(on_rows, k_long, lo_long)
-    col_lo = torch.where(on_rows, lo_long, k_long)
-    row_hi = torch.where(on_rows, k_long, lo_long + 1)
-    col_hi = torch.where(on_rows, lo_long + 1, k_long)
-    values = torch.stack([mask.to(dtype), grad_mask], -1).reshape(-1, 2)
-    v_lo_px = _pixel_values(values, bs, row_lo, col_lo, height, width)
-    v_hi_px = _pixel_values(values, bs, row_hi, col_hi, height, width)
-    lit_is_hi = v_hi_px[:, 0] < v_lo_px[:, 0]
-    # Both centres inside the image (the shadow beyond the frame is unknown, not lit).
-    in_image = (row_lo >= 0) & (col_lo >= 0) & (row_hi < height) & (col_hi < width)
-    differ = (v_hi_px[:, 0] != v_lo_px[:, 0]) & in_image
-    toward_lit = torch.where(lit_is_hi, 1.0, -1.0).to(dtype)
-    valid = differ & (per_edge[:, 4] == toward_lit)
+    q = fam.index_select(0, cut)
+    k = k_lo.index_select(0, cut) + (torch.arange(cut.shape[0], device=device) - first.index_select(0, cut)).to(dtype)
+    t = (k + 0.5 - q[:, 1]) / q[:, 3]  # position along the edge, in [0, 1)
+    cross_u = q[:, 0] + t * q[:, 2]
+    lo = torch.floor(cross_u - 0.5)  # the centres lo + .5 <= cross_u < lo + 1.5 along u
+    on_rows = cut < n_edges
+    edge = cut - n_edges * (~on_rows).long()
+    bs = b.index_select(0, edge)
+    k_long, lo_long = k.long(), lo.long()
+    # Pixels (row, col) of the pair's two centres: lo and lo + 1 along u, k along v.
+    row = torch.where(on_rows, k_long, lo_long)
+    col = torch.where(on_rows, lo_long, k_long)
+    step_r, step_c = (~on_rows).long(), on_rows.long()
+    rows = torch.cat([row, row + step_r])
+    cols = torch.cat([col, col + step_c])
+    inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
+    flat = (bs.repeat(2) * height + rows.clamp(0, height - 1)) * width + cols.clamp(0, width - 1)
+    values = torch.stack([mask.to(dtype), grad_mask], -1).reshape(-1, 2).index_select(0, flat)
+    n_cross = cut.shape[0]
+    m_lo, m_hi = values[:n_cross, 0], values[n_cross:, 0]
+    both_inside = inside[:n_cross] & inside[n_cross:]  # the shadow beyond the frame is unknown
+    lit_is_hi = m_hi < m_lo
+    toward_lit = 2 * lit_is_hi.to(dtype) - 1
+    valid = (m_hi != m_lo) & both_inside & (q[:, 4] == toward_lit)
     # Per pixel pair keep the crossing nearest the lit centre.
     dist = torch.where(lit_is_hi, lo + 1.5 - cross_u, cross_u - lo - 0.5)
-    key = ((bs * (height + 1) + row_lo + 1) * (width + 1) + col_lo + 1) * 2 + on_rows.long()
+    key = ((bs * (height + 1) + row + 1) * (width + 1) + col + 1) * 2 + on_rows.long()
     key = torch.where(valid, key, torch.zeros_like(key))
-    best = torch.full((batch * (height + 1) * (width + 1) * 2,), float("inf"), dtype=dtype, device=points_xy.device)
-    best.scatter_reduce_(0, key, torch.where(valid, dist, torch.full_like(dist, float("inf"))), reduce="amin")
-    win = valid & (dist <= best.index_select(0, key))
-    weight = (win & (per_edge[:, 6] > 0)).to(dtype) * 0.5 * (v_lo_px[:, 1] + v_hi_px[:, 1]) * toward_lit
-    # d(cross_u)/d(a) = (1 - t) (1, -du/dv) and d/d(c) = t (...), in (u, v); back to (x, y).
-    slope = per_edge[:, 2] / per_edge[:, 3]
-    du_dv = torch.stack([torch.ones_like(slope), -slope], 1)  # (u, v) components
-    dxy = torch.where(on_rows[:, None], du_dv, du_dv.flip(1)) * weight[:, None]
-    vertex = (bs * n_vertices)[:, None] + corners[:, :2].index_select(0, edge_of)
+    dist = torch.where(valid, dist, torch.full_like(dist, float("inf")))
+    best = torch.empty(batch * (height + 1) * (width + 1) * 2, dtype=dtype, device=device)
+    best.scatter_reduce_(0, key, dist, reduce="amin", include_self=False)
+    win = valid & (dist <= best.index_select(0, key)) & (q[:, 5] > 0)
+    weight = win.to(dtype) * 0.5 * (values[:n_cross, 1] + values[n_cross:, 1]) * toward_lit
+    # d(cross_u)/d(a) = (1 - t) (1, -du/dv) and d/d(c) = t (1, -du/dv) in (u, v); to (x, y).
+    slope = q[:, 2] / q[:, 3]
+    du = torch.stack([torch.ones_like(slope), -slope], 1)
+    dxy = torch.where(on_rows[:, None], du, du.flip(1)) * weight[:, None]
+    vertex = flat_corners[:, :2].index_select(0, edge)
     grad = torch.zeros_like(points_xy).view(-1, 2)
     grad.index_add_(0, vertex.T.reshape(-1), torch.cat([dxy * (1 - t)[:, None], dxy * t[:, None]]))
     return grad.view_as(points_xy)
-
-
-def _pixel_values(values: torch.Tensor, b, row, col, height: int, width: int) -> torch.Tensor:
-    """Rows of ``values`` ((B*H*W, C)) at pixels (row, col); zero outside the image."""
-    inside = (col >= 0) & (col < width) & (row >= 0) & (row < height)
-    flat = (b * height + row.clamp(0, height - 1)) * width + col.clamp(0, width - 1)
-    return values.index_select(0, flat) * inside[:, None].to(values.dtype)
