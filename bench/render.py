@@ -103,7 +103,10 @@ def main() -> None:
                 work = size * size * batch / 256**2
                 iters = max(5, int((10 if args.quick else 40) / max(1.0, work**0.5)))
                 res = subprocess.run(
-                    [sys.executable, __file__, "--one", f"{size},{batch},{device},{iters}"], capture_output=True, text=True, check=True
+                    [sys.executable, __file__, "--one", f"{size},{batch},{device},{iters}"],
+                    capture_output=True,
+                    text=True,
+                    check=True,
                 )
                 row = json.loads(res.stdout.strip().splitlines()[-1])
                 rows.append(row)

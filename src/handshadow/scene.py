@@ -140,7 +140,7 @@ class Scene:
         m[3, :3], m[3, 3] = n, -c
         return m
 
-    def project(self, points: "torch.Tensor") -> tuple["torch.Tensor", "torch.Tensor"]:
+    def project(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Project points from the light onto the wall, in continuous pixel coordinates.
 
         Args:
