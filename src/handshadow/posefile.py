@@ -6,6 +6,7 @@ rotation and translation) plus the scene, as written by ``fit`` and read by ``re
      "forearm": true,
      "hands": [{"side": "right", "model": "anny", "shape": {...},
                 "pose_deg": [[twist, spread, bend] x 15],   # rig.JOINT_NAMES order, degrees
+                "wrist_deg": [flexion, deviation],           # optional, degrees
                 "rotation": [[...], [...], [...]],           # hand frame -> world, row-major
                 "translation": [x, y, z]},                   # wrist position, metres
                ...],
@@ -36,7 +37,8 @@ class PoseFileError(HandshadowError):
 
 @dataclasses.dataclass(frozen=True)
 class HandPose:
-    """One posed hand. pose_deg (15, 3) twist/spread/bend degrees; rotation (3, 3); translation (3,) m."""
+    """One posed hand. pose_deg (15, 3) twist/spread/bend degrees; rotation (3, 3); translation
+    (3,) m; wrist_deg (2,) flexion and deviation degrees."""
 
     side: str
     model: str
@@ -44,9 +46,11 @@ class HandPose:
     pose_deg: np.ndarray
     rotation: np.ndarray
     translation: np.ndarray
+    wrist_deg: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(2))
 
     def tensors(self, dtype=None, device="cpu"):
-        """(1, 15, 3) radians, (1, 3, 3), (1, 3) tensors for HandModel.forward (float32 by default)."""
+        """(1, 15, 3) radians, (1, 3, 3), (1, 3), (1, 2) radians: HandModel.forward's arguments
+        (float32 by default)."""
         import torch
 
         t = dict(dtype=dtype or torch.float32, device=device)
@@ -54,6 +58,7 @@ class HandPose:
             torch.as_tensor(np.radians(self.pose_deg), **t)[None],
             torch.as_tensor(self.rotation, **t)[None],
             torch.as_tensor(self.translation, **t)[None],
+            torch.as_tensor(np.radians(self.wrist_deg), **t)[None],
         )
 
     def to_json(self) -> dict:
@@ -62,6 +67,7 @@ class HandPose:
             "model": self.model,
             "shape": self.shape,
             "pose_deg": np.round(np.asarray(self.pose_deg, float), 4).tolist(),
+            "wrist_deg": np.round(np.asarray(self.wrist_deg, float), 4).tolist(),
             "rotation": np.round(np.asarray(self.rotation, float), 9).tolist(),
             "translation": np.round(np.asarray(self.translation, float), 9).tolist(),
         }
@@ -145,7 +151,8 @@ def _parse_hand(h, where: str) -> HandPose:
         raise PoseFileError(f"{where}.rotation must be a rotation matrix (orthonormal, det +1)")
     rotation = u @ vt
     translation = _array(h.get("translation"), (3,), f"{where}.translation")
-    return HandPose(side, model, shape, pose, rotation, translation)
+    wrist = _array(h.get("wrist_deg", np.zeros(2)), (2,), f"{where}.wrist_deg")
+    return HandPose(side, model, shape, pose, rotation, translation, wrist)
 
 
 def _array(value, shape, where: str) -> np.ndarray:

@@ -3,7 +3,9 @@
 In a real hand shadow the forearm is lit too. The tube starts at the wrist boundary loop itself
 (so hand and forearm form one closed surface), blends the loop's cross-section into an ellipse
 over the first centimetres, widens toward the elbow like a real forearm, and ends in a rounded
-cap. It is skinned rigidly to the root bone, so it follows only the hand's global transform.
+cap. It rides on a forearm bone that turns about the wrist joint (flexion/extension and
+radial/ulnar deviation, see model.py); the first 3.5 cm blend between hand and forearm so the
+wrist bends smoothly. With the wrist straight it follows only the hand's global transform.
 """
 
 from __future__ import annotations
@@ -13,13 +15,16 @@ import numpy as np
 from handshadow.hands.rig import HandRig
 
 FOREARM_LENGTH_M = 0.28  # wrist crease to elbow of an adult (about 25-28 cm)
+WRIST_JOINT_DEPTH_M = 0.015  # the wrist's centre of rotation lies this far proximal of the opening
+BLEND_M = 0.035  # forearm rings blend from the hand to the forearm bone over this length
 WIDENING = 0.35  # cross-section scale at the widest point minus one (forearm vs. wrist)
 _STATIONS_M = np.array([0.004, 0.010, 0.018, 0.028, 0.04, 0.055, 0.075, 0.10, 0.13, 0.16, 0.19, 0.22, 0.25, 0.27, 0.28])
 _CAP_FRACTIONS = np.array([0.8, 0.5])  # rings of the rounded cap, as a share of the last radius
 
 
-def forearm_geometry(rig: HandRig) -> tuple[np.ndarray, np.ndarray]:
-    """New vertices (N, 3) and faces (M, 3) of the forearm, indexed after the hand's vertices.
+def forearm_geometry(rig: HandRig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """New vertices (N, 3) and faces (M, 3) of the forearm, indexed after the hand's vertices,
+    and each new vertex's distance (N,) from the wrist opening along the forearm, metres.
 
     Raises ValueError if the hand mesh has no open wrist boundary.
     """
@@ -27,23 +32,23 @@ def forearm_geometry(rig: HandRig) -> tuple[np.ndarray, np.ndarray]:
     if len(loop) < 3:
         raise ValueError(f"the {rig.model} {rig.side} hand mesh has no open wrist boundary for a forearm")
     ring0 = rig.rest_vertices[loop]
-    centre = ring0.mean(0)
-    # Extrusion axis: the wrist loop's plane normal, pointing away from the fingers (-y).
-    _, _, vt = np.linalg.svd(ring0 - centre)
-    axis = vt[2] if vt[2][1] < 0 else -vt[2]
+    centre, axis = forearm_axis(rig)
     offsets = ring0 - centre
     offsets -= np.outer(offsets @ axis, axis)
     ellipse = _ellipse_like(offsets)
-    rings = []
+    rings, station = [], []
     for s in _STATIONS_M:
+        station.append(np.full(len(loop), s))
         blend = _smoothstep(s / 0.03)
-        scale = 1.0 + WIDENING * _smoothstep(s / 0.18)
+        scale = forearm_scale(s)
         rings.append(centre + s * axis + scale * ((1 - blend) * offsets + blend * ellipse))
     last_scale = 1.0 + WIDENING
     for k, f in enumerate(_CAP_FRACTIONS):
         depth = FOREARM_LENGTH_M + 0.02 * np.sqrt(1 - f**2) * (k + 1) / len(_CAP_FRACTIONS)
         rings.append(centre + depth * axis + f * last_scale * ellipse)
+        station.append(np.full(len(loop), depth))
     tip = centre + (FOREARM_LENGTH_M + 0.025) * axis
+    station.append(np.full(1, FOREARM_LENGTH_M + 0.025))
 
     n_hand, n_loop = rig.num_vertices, len(loop)
     vertices = np.concatenate([np.concatenate(rings), tip[None]])
@@ -59,22 +64,48 @@ def forearm_geometry(rig: HandRig) -> tuple[np.ndarray, np.ndarray]:
     tip_index = n_hand + len(rings) * n_loop
     for i in range(n_loop):
         faces.append((prev[i], prev[(i + 1) % n_loop], tip_index))
-    return vertices, np.asarray(faces, dtype=np.int64)
+    return vertices, np.asarray(faces, dtype=np.int64), np.concatenate(station)
+
+
+def wrist_centre(rig: HandRig) -> np.ndarray:
+    """(3,) the wrist joint's centre of rotation, hand frame."""
+    centre, axis = forearm_axis(rig)
+    return centre + WRIST_JOINT_DEPTH_M * axis
+
+
+def forearm_axis(rig: HandRig) -> tuple[np.ndarray, np.ndarray]:
+    """Centre of the wrist opening (3,) and the forearm's unit axis (3,): the opening's plane
+    normal, pointing away from the fingers (-y in the hand frame)."""
+    ring = rig.rest_vertices[rig.wrist_loop]
+    centre = ring.mean(0)
+    _, _, vt = np.linalg.svd(ring - centre)
+    return centre, (vt[2] if vt[2][1] < 0 else -vt[2])
+
+
+def forearm_scale(s: float) -> float:
+    """Cross-section scale at distance s (m) from the wrist: 1 at the wrist, 1 + WIDENING from
+    18 cm on, smoothly."""
+    return 1.0 + WIDENING * _smoothstep(s / 0.18)
 
 
 def attach_forearm(rig: HandRig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Hand plus forearm: vertices (V', 3), faces (F', 3), skin weights (V', K).
+    """Hand plus forearm: vertices (V', 3), faces (F', 3), skin weights (V', K + 1).
 
-    The forearm's vertices are weighted fully to the root bone (bone 0), which only the global
-    transform moves; the hand's vertices keep their indices.
+    Column K is the forearm bone. Forearm rings blend from the root bone (bone 0, which only the
+    global transform moves) to the forearm bone over the first BLEND_M; the hand's vertices
+    keep their indices and weights.
     """
-    extra_v, extra_f = forearm_geometry(rig)
-    weights = np.zeros((len(extra_v), rig.skin_weights.shape[1]))
-    weights[:, 0] = 1.0
+    extra_v, extra_f, station = forearm_geometry(rig)
+    k = rig.skin_weights.shape[1]
+    hand_w = np.concatenate([rig.skin_weights, np.zeros((rig.num_vertices, 1))], axis=1)
+    w = np.array([_smoothstep(s / BLEND_M) for s in station])
+    weights = np.zeros((len(extra_v), k + 1))
+    weights[:, 0] = 1.0 - w
+    weights[:, k] = w
     return (
         np.concatenate([rig.rest_vertices, extra_v]),
         np.concatenate([rig.faces, extra_f]),
-        np.concatenate([rig.skin_weights, weights]),
+        np.concatenate([hand_w, weights]),
     )
 
 

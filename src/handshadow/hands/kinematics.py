@@ -86,12 +86,14 @@ def forward_kinematics(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Rigid transform of every bone, mapping rest-pose points to posed points.
 
-    Bone k rotates about its rest head h_k by its own rotation R_k (identity for bones that
-    are not articulated) after its parent: G_k = G_parent(k) o [x -> R_k (x - h_k) + h_k].
-    Bones are composed level by level (all bones of one depth at once).
+    Bone k rotates about its rest head h_k by its own rotation R_k after its parent:
+    G_k = G_parent(k) o [x -> R_k (x - h_k) + h_k]. Only the 15 finger joints rotate (the
+    wrist, palm and metacarpal bones are fixed; the global transform is applied afterwards),
+    so each finger is a chain J1 -> J2 -> J3 hanging from fixed bones, composed for all five
+    fingers at once.
 
     Args:
-        joint_rotations: (B, 15, 3, 3) rotations of the articulated bones.
+        joint_rotations: (B, 15, 3, 3) rotations of the articulated bones (JOINT_NAMES order).
         joint_bones: (15,) long, the bone index of each articulated joint.
         bone_heads: (K, 3) rest heads.
         bone_parents: K parent indices, -1 for roots.
@@ -100,32 +102,53 @@ def forward_kinematics(
     """
     batch = joint_rotations.shape[0]
     k_bones = bone_heads.shape[0]
-    eye = torch.eye(3, dtype=joint_rotations.dtype, device=joint_rotations.device)
-    local = eye.expand(batch, k_bones, 3, 3).clone()
-    local[:, joint_bones] = joint_rotations
+    heads = bone_heads.index_select(0, joint_bones)  # (15, 3)
     # Local transform about the head: x -> R (x - h) + h, i.e. t = h - R h.
-    local_t = bone_heads - (local @ bone_heads[..., None])[..., 0]
-    rots, trans = local.clone(), local_t.clone()
-    for level, parents in _levels(tuple(bone_parents)):
-        idx = torch.as_tensor(level, device=local.device)
-        par = torch.as_tensor(parents, device=local.device)
-        rp, tp = rots[:, par], trans[:, par]
-        rots[:, idx] = rp @ local[:, idx]
-        trans[:, idx] = (rp @ local_t[:, idx, :, None])[..., 0] + tp
-    return rots, trans
+    t_local = heads - (joint_rotations @ heads[..., None])[..., 0]  # (B, 15, 3)
+    r = joint_rotations.view(batch, 5, 3, 3, 3)
+    t = t_local.view(batch, 5, 3, 3)
+    r2 = r[:, :, 0] @ r[:, :, 1]
+    t2 = (r[:, :, 0] @ t[:, :, 1, :, None])[..., 0] + t[:, :, 0]
+    r3 = r2 @ r[:, :, 2]
+    t3 = (r2 @ t[:, :, 2, :, None])[..., 0] + t2
+    rots = torch.stack([r[:, :, 0], r2, r3], 2).reshape(batch, 15, 3, 3)
+    trans = torch.stack([t[:, :, 0], t2, t3], 2).reshape(batch, 15, 3)
+    # Every other bone keeps the identity: gather from [identity, joints...] by bone.
+    source = _bone_sources(tuple(int(b) for b in joint_bones), tuple(bone_parents), k_bones)
+    source = torch.as_tensor(source, device=joint_rotations.device)
+    eye = torch.eye(3, dtype=rots.dtype, device=rots.device).expand(batch, 1, 3, 3)
+    all_r = torch.cat([eye, rots], 1).index_select(1, source)
+    all_t = torch.cat([torch.zeros_like(trans[:, :1]), trans], 1).index_select(1, source)
+    return all_r, all_t
 
 
 @functools.lru_cache(maxsize=8)
-def _levels(parents: tuple[int, ...]) -> list[tuple[list[int], list[int]]]:
-    """Bones grouped by depth below the roots (roots excluded): [(bones, their parents)]."""
-    depth = {}
-    for k, p in enumerate(parents):
-        depth[k] = 0 if p < 0 else depth[p] + 1  # parents come before children
-    levels = []
-    for d in range(1, max(depth.values(), default=0) + 1):
-        bones = [k for k in range(len(parents)) if depth[k] == d]
-        levels.append((bones, [parents[k] for k in bones]))
-    return levels
+def _bone_sources(joint_bones: tuple[int, ...], parents: tuple[int, ...], k_bones: int) -> list[int]:
+    """Per bone, 0 (fixed) or 1 + its joint index; checks the finger-chain structure."""
+    joint_of = {b: j for j, b in enumerate(joint_bones)}
+    for j, b in enumerate(joint_bones):
+        parent = parents[b]
+        if j % 3:
+            ok = parent == joint_bones[j - 1]
+        else:  # J1 hangs from fixed bones only
+            ok = True
+            while parent >= 0:
+                ok &= parent not in joint_of
+                parent = parents[parent]
+        if not ok:
+            raise ValueError("the rig's finger joints do not form J1 -> J2 -> J3 chains under fixed bones")
+    for k in range(k_bones):
+        if k not in joint_of and any(p in joint_of for p in _ancestors(k, parents)):
+            raise ValueError(f"bone {k} hangs from a finger joint but is not one of the 15 joints")
+    return [0 if k not in joint_of else 1 + joint_of[k] for k in range(k_bones)]
+
+
+def _ancestors(k: int, parents: tuple[int, ...]) -> list[int]:
+    out = []
+    while parents[k] >= 0:
+        k = parents[k]
+        out.append(k)
+    return out
 
 
 def linear_blend_skinning(
@@ -146,9 +169,8 @@ def linear_blend_skinning(
     batch, k_bones = bone_rotations.shape[:2]
     transforms = torch.cat([bone_rotations, bone_translations[..., None]], dim=-1)  # (B,K,3,4)
     blended = (skin_weights @ transforms.reshape(batch, k_bones, 12)).reshape(batch, -1, 3, 4)
-    if rest_vertices.dim() == 2:
-        rest_vertices = rest_vertices.expand(batch, -1, -1)
-    return (blended[..., :3] @ rest_vertices[..., None])[..., 0] + blended[..., 3]
+    # Many tiny 3x3 products: an elementwise product and a sum beats a batched matmul here.
+    return (blended[..., :3] * rest_vertices[..., None, :]).sum(-1) + blended[..., 3]
 
 
 def apply_rigid(points: torch.Tensor, rotation: torch.Tensor, translation: torch.Tensor) -> torch.Tensor:

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import torch
 
 from handshadow.hands import kinematics
-from handshadow.hands.forearm import attach_forearm, cap_wrist
+from handshadow.hands.forearm import attach_forearm, cap_wrist, wrist_centre
 from handshadow.hands.rig import N_JOINTS, HandRig
 
 
@@ -21,12 +22,16 @@ class HandOutput:
 
     vertices: (B, V, 3); faces: (F, 3) long (shared by the batch);
     keypoints: (B, 21, 3) wrist, then per finger (thumb..little) its 3 joints and its tip
-    (KEYPOINT_NAMES order).
+    (KEYPOINT_NAMES order);
+    bone_rotations (B, K, 3, 3), bone_translations (B, K, 3): each bone's rigid transform of
+    rest points, hand frame (before the global rotation and translation).
     """
 
     vertices: torch.Tensor
     faces: torch.Tensor
     keypoints: torch.Tensor
+    bone_rotations: torch.Tensor
+    bone_translations: torch.Tensor
 
 
 class HandModel(torch.nn.Module):
@@ -47,6 +52,10 @@ class HandModel(torch.nn.Module):
         self.num_hand_vertices = rig.num_vertices
         # Either way the mesh is closed: a forearm, or a cap over the wrist opening.
         verts, faces, weights = attach_forearm(rig) if forearm else cap_wrist(rig)
+        self.forearm_bone = len(rig.bone_parents) if forearm else None  # an extra bone, last
+        self.register_buffer("wrist_centre", torch.as_tensor(wrist_centre(rig) if forearm else np.zeros(3), dtype=dtype))
+        # Deviation toward the thumb turns the forearm toward the little finger: mirrored sides.
+        self.radial_sign = 1.0 if rig.side == "right" else -1.0
         self.has_forearm = forearm
         self.register_buffer("rest_vertices", torch.as_tensor(verts, dtype=dtype))
         self.register_buffer("faces", torch.as_tensor(faces, dtype=torch.long))
@@ -71,6 +80,7 @@ class HandModel(torch.nn.Module):
         pose_rad: torch.Tensor,
         rotation: torch.Tensor | None = None,
         translation: torch.Tensor | None = None,
+        wrist_rad: torch.Tensor | None = None,
     ) -> HandOutput:
         """Pose the hand.
 
@@ -78,19 +88,23 @@ class HandModel(torch.nn.Module):
             pose_rad: (B, 15, 3) twist, spread, bend per joint, radians (see rig.py).
             rotation: (B, 3, 3) hand frame -> world rotation; identity if None.
             translation: (B, 3) world position of the wrist, metres; zero if None.
+            wrist_rad: (B, 2) wrist flexion (positive: the hand bends toward the palm) and
+                deviation (positive: toward the thumb), radians; the forearm turns, the hand
+                stays where rotation and translation put it. Zero if None.
         Returns:
             HandOutput with (B, V, 3) vertices (forearm included when enabled).
         """
         if pose_rad.dim() != 3 or pose_rad.shape[1:] != (N_JOINTS, 3):
             raise ValueError(f"pose must have shape (B, 15, 3), got {tuple(pose_rad.shape)}")
         rotations = kinematics.anatomical_rotations(pose_rad, self.joint_axes)
-        return self.forward_rotations(rotations, rotation, translation)
+        return self.forward_rotations(rotations, rotation, translation, wrist_rad)
 
     def forward_rotations(
         self,
         joint_rotations: torch.Tensor,
         rotation: torch.Tensor | None = None,
         translation: torch.Tensor | None = None,
+        wrist_rad: torch.Tensor | None = None,
     ) -> HandOutput:
         """Pose the hand from joint rotations (B, 15, 3, 3) in the hand's rest frame."""
         batch = joint_rotations.shape[0]
@@ -100,6 +114,10 @@ class HandModel(torch.nn.Module):
         bone_r, bone_t = kinematics.forward_kinematics(
             joint_rotations, self.joint_bones, self.bone_heads, self.bone_parents
         )
+        if self.forearm_bone is not None:
+            fr, ft = self._forearm_transform(wrist_rad, batch, joint_rotations)
+            bone_r = torch.cat([bone_r, fr[:, None]], 1)
+            bone_t = torch.cat([bone_t, ft[:, None]], 1)
         verts = kinematics.linear_blend_skinning(rest, self.skin_weights, bone_r, bone_t)
         # Keypoints: a joint's own transform leaves its centre where its parent put it.
         heads = self.bone_heads[self.joint_bones]
@@ -117,7 +135,22 @@ class HandModel(torch.nn.Module):
             translation = torch.zeros_like(verts[:, 0]) if translation is None else translation
             verts = kinematics.apply_rigid(verts, rotation, translation)
             keypoints = kinematics.apply_rigid(keypoints, rotation, translation)
-        return HandOutput(vertices=verts, faces=self.faces, keypoints=keypoints)
+        return HandOutput(verts, self.faces, keypoints, bone_r, bone_t)
+
+    def _forearm_transform(self, wrist_rad, batch, like) -> tuple[torch.Tensor, torch.Tensor]:
+        """The forearm bone's rotation (B, 3, 3) and translation (B, 3) in the hand frame: the
+        inverse of the wrist's motion, about the wrist centre. Flexion turns about the hand's x
+        axis (the forearm swings toward the palm side), deviation about its z axis."""
+        eye = torch.eye(3, dtype=like.dtype, device=like.device)
+        if wrist_rad is None:
+            return eye.expand(batch, 3, 3), like.new_zeros(batch, 3)
+        flex, dev = wrist_rad[:, 0], wrist_rad[:, 1] * self.radial_sign
+        zeros = torch.zeros_like(flex)
+        rx = kinematics.rotvec_to_rotmat(torch.stack([flex, zeros, zeros], -1))
+        rz = kinematics.rotvec_to_rotmat(torch.stack([zeros, zeros, dev], -1))
+        rot = rz @ rx
+        c = self.wrist_centre
+        return rot, c - (rot @ c[:, None])[..., 0]
 
     def _pose_correctives(self, joint_rotations: torch.Tensor) -> torch.Tensor:
         """MANO pose blend shapes: posedirs applied to (R - I) in the native frame. (B, V, 3)."""

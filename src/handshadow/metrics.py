@@ -1,0 +1,89 @@
+"""Judging a fit (shared/notes/metrics.md): IoU alone rewards blobs.
+
+All functions take binary (H, W) numpy masks (shadow, target) and work in pixels of that frame.
+    iou              intersection over union
+    boundary_f1      outlines within 2 px of each other, precision and recall combined
+    hd95             95th percentile of outline-to-outline distances, both ways, / frame height
+    thin_recall      share of the target's thin parts covered by the shadow; thin parts are
+                     what an opening with a disc of radius 4 % of the frame height removes
+A fit is a success when IoU >= 0.8, thin-part recall >= 0.6 and HD95 <= 0.03.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy import ndimage
+from skimage.morphology import disk, opening
+
+SUCCESS_IOU = 0.8
+SUCCESS_THIN = 0.6
+SUCCESS_HD95 = 0.03
+THIN_RADIUS_SHARE = 0.04
+
+
+@dataclasses.dataclass(frozen=True)
+class FitScore:
+    iou: float
+    boundary_f1: float
+    hd95: float
+    thin_recall: float
+
+    @property
+    def success(self) -> bool:
+        return self.iou >= SUCCESS_IOU and self.thin_recall >= SUCCESS_THIN and self.hd95 <= SUCCESS_HD95
+
+    def as_dict(self) -> dict:
+        return {**dataclasses.asdict(self), "success": self.success}
+
+
+def iou(shadow: np.ndarray, target: np.ndarray) -> float:
+    union = np.logical_or(shadow, target).sum()
+    return float(np.logical_and(shadow, target).sum() / union) if union else 1.0
+
+
+def outline(mask: np.ndarray) -> np.ndarray:
+    """Pixels of the mask with a 4-neighbour outside it (the frame border counts as outside)."""
+    mask = np.asarray(mask, bool)
+    return mask & ~ndimage.binary_erosion(mask, border_value=0)
+
+
+def _distance_to(mask_outline: np.ndarray) -> np.ndarray:
+    if not mask_outline.any():
+        return np.full(mask_outline.shape, np.inf)
+    return ndimage.distance_transform_edt(~mask_outline)
+
+
+def boundary_f1(shadow: np.ndarray, target: np.ndarray, tol_px: float = 2.0) -> float:
+    a, b = outline(shadow), outline(target)
+    if not a.any() or not b.any():
+        return float(a.any() == b.any())
+    precision = (_distance_to(b)[a] <= tol_px).mean()
+    recall = (_distance_to(a)[b] <= tol_px).mean()
+    return float(2 * precision * recall / (precision + recall)) if precision + recall else 0.0
+
+
+def hd95(shadow: np.ndarray, target: np.ndarray) -> float:
+    a, b = outline(shadow), outline(target)
+    if not a.any() or not b.any():
+        return 1.0 if a.any() != b.any() else 0.0
+    d = np.concatenate([_distance_to(b)[a], _distance_to(a)[b]])
+    return float(np.percentile(d, 95) / shadow.shape[0])
+
+
+def thin_parts(target: np.ndarray) -> np.ndarray:
+    """What an opening with a disc of radius 4 % of the frame height removes from the target."""
+    radius = max(1, int(round(THIN_RADIUS_SHARE * target.shape[0])))
+    target = np.asarray(target, bool)
+    return target & ~opening(target, disk(radius)).astype(bool)
+
+
+def thin_recall(shadow: np.ndarray, target: np.ndarray, thin: np.ndarray | None = None) -> float:
+    thin = thin_parts(target) if thin is None else thin
+    return float((np.asarray(shadow, bool) & thin).sum() / thin.sum()) if thin.any() else 1.0
+
+
+def score(shadow: np.ndarray, target: np.ndarray) -> FitScore:
+    shadow, target = np.asarray(shadow, bool), np.asarray(target, bool)
+    return FitScore(iou(shadow, target), boundary_f1(shadow, target), hd95(shadow, target), thin_recall(shadow, target))

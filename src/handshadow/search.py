@@ -1,0 +1,321 @@
+"""The search: many hand hypotheses optimised together, pruned as they go, the best refined.
+
+No I/O here. A hypothesis is one or two hands (pose angles, global rotation, translation).
+Joint angles are parameterised inside their limits (angle = lo + (hi - lo) sigmoid(z)), so every
+hypothesis respects the limits by construction; rotations are a rotation vector applied in world
+axes on top of a starting rotation; translations are metres.
+
+Stages run coarse to fine: low resolution with a wide blur and a strong pull toward missing
+target parts first, the exact shadow at full resolution last. After each stage the hypotheses
+are ranked by the fit measures (IoU, thin-part recall, HD95) and only the best continue.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from handshadow import losses
+from handshadow.hands.kinematics import rotvec_to_rotmat
+from handshadow.hands.model import HandModel
+from handshadow.hands.proxies import PenetrationModel, hand_spheres
+from handshadow.metrics import score
+from handshadow.render import ShadowRenderer, gaussian_blur
+from handshadow.scene import Scene
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class Stage:
+    """One coarse-to-fine stage: resolution (pixels of the frame height), blur and attraction
+    radius in full-resolution pixels, Adam steps, and how many hypotheses survive it."""
+
+    height: int
+    blur_px: float
+    attract_px: float
+    steps: int
+    keep: int
+    lr_scale: float = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Weights:
+    l2: float = 1.0
+    thin: float = 4.0  # extra weight of the target's thin parts in the image term
+    excess: float = 2.0
+    attraction: float = 0.3
+    penetration: float = 0.02
+    placement: float = 0.05
+    forearm: float = 0.05
+
+
+@dataclasses.dataclass
+class HandPoses:
+    """Poses of one hand for B hypotheses: pose_rad (B, 15, 3), rotation (B, 3, 3),
+    translation (B, 3) metres, wrist_rad (B, 2) flexion and deviation."""
+
+    pose_rad: torch.Tensor
+    rotation: torch.Tensor
+    translation: torch.Tensor
+    wrist_rad: torch.Tensor
+
+    def select(self, idx) -> HandPoses:
+        return HandPoses(self.pose_rad[idx], self.rotation[idx], self.translation[idx], self.wrist_rad[idx])
+
+    def args(self) -> tuple[torch.Tensor, ...]:
+        """HandModel.forward's arguments."""
+        return self.pose_rad, self.rotation, self.translation, self.wrist_rad
+
+    @staticmethod
+    def cat(items: list[HandPoses]) -> HandPoses:
+        return HandPoses(*(torch.cat(ts) for ts in zip(*(i.args() for i in items))))
+
+
+@dataclasses.dataclass(frozen=True)
+class Limits:
+    """Joint limits of one hand, radians: joints (15, 3, 2) and wrist (2, 2) [low, high]."""
+
+    joints: torch.Tensor
+    wrist: torch.Tensor
+
+
+class Hypotheses(torch.nn.Module):
+    """Optimisable parameters of B hypotheses of one or two hands."""
+
+    def __init__(self, starts: list[HandPoses], limits: list[Limits]):
+        super().__init__()
+        self.n_hands = len(starts)
+        for i, (s, lim) in enumerate(zip(starts, limits)):
+            for name, value, bounds in (("", s.pose_rad, lim.joints), ("wrist_", s.wrist_rad, lim.wrist)):
+                lo, hi = bounds[..., 0], bounds[..., 1]
+                self.register_buffer(f"{name}lo{i}", lo)
+                self.register_buffer(f"{name}span{i}", hi - lo)
+                frac = ((value - lo) / (hi - lo).clamp(min=1e-9)).clamp(0.02, 0.98)
+                self.register_parameter(f"{name}logits{i}", torch.nn.Parameter(torch.log(frac / (1 - frac))))
+            self.register_buffer(f"rot0_{i}", s.rotation.clone())
+            self.register_parameter(f"rotvec{i}", torch.nn.Parameter(torch.zeros_like(s.translation)))
+            self.register_parameter(f"trans{i}", torch.nn.Parameter(s.translation.clone()))
+
+    @property
+    def batch(self) -> int:
+        return self.trans0.shape[0]
+
+    def hand(self, i: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(pose_rad (B, 15, 3), rotation (B, 3, 3), translation (B, 3), wrist_rad (B, 2)) of hand i."""
+        pose = getattr(self, f"lo{i}") + getattr(self, f"span{i}") * torch.sigmoid(getattr(self, f"logits{i}"))
+        wrist = getattr(self, f"wrist_lo{i}") + getattr(self, f"wrist_span{i}") * torch.sigmoid(getattr(self, f"wrist_logits{i}"))
+        rot = rotvec_to_rotmat(getattr(self, f"rotvec{i}")) @ getattr(self, f"rot0_{i}")
+        return pose, rot, getattr(self, f"trans{i}"), wrist
+
+    def poses(self) -> list[HandPoses]:
+        """Current values, detached."""
+        with torch.no_grad():
+            return [HandPoses(*(t.detach().clone() for t in self.hand(i))) for i in range(self.n_hands)]
+
+    def param_groups(self, lr_scale: float) -> list[dict]:
+        groups = []
+        for i in range(self.n_hands):
+            groups += [
+                {"params": [getattr(self, f"logits{i}"), getattr(self, f"wrist_logits{i}")], "lr": 0.08 * lr_scale},
+                {"params": [getattr(self, f"rotvec{i}")], "lr": 0.02 * lr_scale},
+                {"params": [getattr(self, f"trans{i}")], "lr": 0.003 * lr_scale},
+            ]
+        return groups
+
+
+@dataclasses.dataclass
+class Progress:
+    """What a progress callback sees: stage index, step, total steps so far, the best
+    hypothesis's current shadow (H, W) numpy at the stage resolution, its IoU, and its poses."""
+
+    stage: int
+    step: int
+    done: int
+    total: int
+    shadow: np.ndarray
+    iou: float
+    poses: list[HandPoses]
+
+
+@dataclasses.dataclass
+class SearchResult:
+    poses: list[HandPoses]  # each with batch 1: the best hypothesis
+    steps: int
+    seconds: float
+    interrupted: bool
+    ranking: list[dict]  # final scores of the surviving hypotheses
+
+
+class Searcher:
+    """Runs the stages for a target.
+
+    Args:
+        scene: the full-resolution scene (its image size is the output size).
+        target: (H, W) bool target frame at the scene's resolution.
+        hands: one or two HandModels (same device).
+        limits: per hand its joint limits.
+    """
+
+    def __init__(self, scene: Scene, target: np.ndarray, hands: list[HandModel], limits: list[Limits], weights: Weights | None = None):
+        self.scene = scene
+        self.target = np.asarray(target, bool)
+        self.hands = hands
+        self.limits = limits
+        self.weights = weights or Weights()
+        self.device = hands[0].rest_vertices.device
+        self.dtype = hands[0].rest_vertices.dtype
+        self.penetration = PenetrationModel([hand_spheres(h.rig, h.has_forearm) for h in hands], dtype=self.dtype).to(self.device)
+        self._renderers: dict[int, tuple[Scene, ShadowRenderer, losses.TargetMaps]] = {}
+        lo, hi = scene.light_depth_range()
+        self.height_range = (0.03, min(hi - 0.25, 3.0) if math.isfinite(hi) else 3.0)
+
+    def level(self, height: int) -> tuple[Scene, ShadowRenderer, losses.TargetMaps]:
+        """Scene, renderer and target maps at a frame height (cached)."""
+        if height not in self._renderers:
+            full_h, full_w = self.target.shape
+            width = max(1, round(full_w * height / full_h))
+            scene = self.scene.with_size(width, height)
+            renderer = ShadowRenderer(scene, [h.faces for h in self.hands], [h.num_vertices for h in self.hands]).to(self.device)
+            small = self.target if height == full_h else _resize_mask(self.target, height, width)
+            self._renderers[height] = (scene, renderer, losses.TargetMaps.build(small, self.device, self.dtype))
+        return self._renderers[height]
+
+    def objective(self, hyp: Hypotheses, stage: Stage) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-hypothesis loss (B,) and the exact shadow (B, H, W) at the stage resolution."""
+        w = self.weights
+        scene, renderer, maps = self.level(stage.height)
+        scale = stage.height / self.target.shape[0]
+        outs, globals_ = [], []
+        for i, hand in enumerate(self.hands):
+            pose, rot, trans, wrist = hyp.hand(i)
+            outs.append(hand(pose, rot, trans, wrist))
+            globals_.append((rot, trans))
+        xy, height = renderer.project([o.vertices for o in outs])
+        from handshadow.render.shadow import shadow_mask
+
+        mask = shadow_mask(xy, renderer.topology, scene.image.height, scene.image.width)
+        blur = stage.blur_px * scale
+        soft = gaussian_blur(mask, blur)
+        target_soft = gaussian_blur(maps.target[None], blur)[0]
+        weight = 1.0 + w.thin * gaussian_blur(maps.thin[None], max(blur, 1.0))[0]
+        total = w.l2 * losses.weighted_l2(soft, target_soft, weight)
+        total = total + w.excess * losses.excess(mask, maps.outside_dist)
+        if w.attraction and stage.attract_px > 0:
+            total = total + w.attraction * losses.attraction(mask, maps.target, stage.attract_px * scale)
+        centres = self.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
+        total = total + w.penetration * losses.penetration(self.penetration.depths(centres))
+        total = total + w.placement * losses.placement(height, *self.height_range)
+        total = total + w.forearm * self._forearm_terms(outs, globals_)
+        return total, mask
+
+    def _forearm_terms(self, outs, globals_) -> torch.Tensor:
+        """Forearms come from a body behind the hands: they must not point into the wall, and
+        two wrists stay within reach of each other (at most 45 cm apart)."""
+        n = torch.as_tensor(self.scene.wall.normal, dtype=self.dtype, device=self.device)
+        out = 0
+        for hand, o, (rot, _) in zip(self.hands, outs, globals_):
+            if hand.forearm_bone is None:
+                continue
+            # The forearm's direction toward the elbow: the hand frame's -y turned by the wrist.
+            proximal = -(rot @ o.bone_rotations[:, hand.forearm_bone])[:, :, 1]
+            out = out + losses.soft_range(proximal @ n, -0.2, 1.0, 0.2)
+        if len(globals_) == 2:
+            gap = (globals_[0][1] - globals_[1][1]).norm(dim=1)
+            out = out + losses.soft_range(gap, 0.0, 0.45, 0.05)
+        return out
+
+    def run(
+        self,
+        starts: list[HandPoses],
+        stages: list[Stage],
+        progress: Callable[[Progress], None] | None = None,
+        every: int = 10,
+        deadline_s: float | None = None,
+    ) -> SearchResult:
+        """Optimise the starting hypotheses through the stages; Ctrl-C (KeyboardInterrupt) or
+        the deadline stops early and keeps the best so far."""
+        t0 = time.perf_counter()
+        total_steps = sum(s.steps for s in stages)
+        done, interrupted = 0, False
+        hyp = Hypotheses(starts, self.limits).to(self.device)
+        best_idx = torch.zeros(1, dtype=torch.long)
+        try:
+            for si, stage in enumerate(stages):
+                opt = torch.optim.Adam(hyp.param_groups(stage.lr_scale))
+                sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(1, stage.steps), eta_min=0.0)
+                for step in range(stage.steps):
+                    opt.zero_grad(set_to_none=True)
+                    loss, mask = self.objective(hyp, stage)
+                    loss.sum().backward()
+                    opt.step()
+                    sched.step()
+                    done += 1
+                    if progress and (step % every == 0 or step == stage.steps - 1):
+                        best = int(torch.argmin(loss.detach()))
+                        m = mask[best].detach().cpu().numpy()
+                        progress(Progress(si, step, done, total_steps, m, _iou_small(m, self.level(stage.height)[2]), [p.select(slice(best, best + 1)) for p in hyp.poses()]))
+                    if deadline_s is not None and time.perf_counter() - t0 > deadline_s:
+                        raise TimeoutError
+                keep = min(stage.keep, hyp.batch)
+                best_idx = self.rank(hyp, stage)[:keep]
+                hyp = Hypotheses([p.select(best_idx) for p in hyp.poses()], self.limits).to(self.device)
+        except KeyboardInterrupt:
+            interrupted = True
+        except TimeoutError:
+            log.info("search stopped at its time limit")
+        final = self.rank_details(hyp)
+        best = final[0]["index"]
+        poses = [p.select(slice(best, best + 1)) for p in hyp.poses()]
+        return SearchResult(poses, done, time.perf_counter() - t0, interrupted, final)
+
+    @torch.no_grad()
+    def shadows(self, poses: list[HandPoses], height: int | None = None) -> torch.Tensor:
+        """(B, H, W) exact shadows of hypotheses at a resolution (full by default)."""
+        scene, renderer, _ = self.level(height or self.target.shape[0])
+        verts = [hand(*p.args()).vertices for hand, p in zip(self.hands, poses)]
+        from handshadow.render.shadow import shadow_mask
+
+        xy, _ = renderer.project(verts)
+        return shadow_mask(xy, renderer.topology, scene.image.height, scene.image.width)
+
+    def rank(self, hyp: Hypotheses, stage: Stage) -> torch.Tensor:
+        """Indices of hypotheses, best first, by the fit measures at the stage resolution."""
+        _, _, maps = self.level(stage.height)
+        masks = self.shadows(hyp.poses(), stage.height).cpu().numpy() > 0.5
+        target = maps.target.cpu().numpy() > 0.5
+        keys = [rank_key(score(m, target)) for m in masks]
+        order = sorted(range(len(keys)), key=keys.__getitem__)
+        return torch.as_tensor(order, dtype=torch.long, device=self.device)
+
+    def rank_details(self, hyp: Hypotheses) -> list[dict]:
+        masks = self.shadows(hyp.poses()).cpu().numpy() > 0.5
+        rows = []
+        for i, m in enumerate(masks):
+            s = score(m, self.target)
+            rows.append({"index": i, **s.as_dict(), "key": rank_key(s)})
+        return sorted(rows, key=lambda r: r["key"])
+
+
+def rank_key(s) -> tuple:
+    """Sort key, smaller is better: successes first, then a blend of the measures."""
+    return (not s.success, -(s.iou + 0.5 * s.thin_recall - 4.0 * s.hd95))
+
+
+def _iou_small(mask: np.ndarray, maps: losses.TargetMaps) -> float:
+    t = maps.target.cpu().numpy() > 0.5
+    m = mask > 0.5
+    union = (m | t).sum()
+    return float((m & t).sum() / union) if union else 1.0
+
+
+def _resize_mask(mask: np.ndarray, height: int, width: int) -> np.ndarray:
+    from skimage.transform import resize
+
+    return resize(mask.astype(float), (height, width), order=1, anti_aliasing=True) >= 0.5
