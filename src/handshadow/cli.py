@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from pathlib import Path
 
 from handshadow import examples
 from handshadow.errors import HandshadowError
@@ -31,10 +32,70 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_examples(args: argparse.Namespace) -> int:
+    print("Built-in targets (handshadow fit NAME):")
+    for name, about in examples.list_targets():
+        print(f"  {name:14s} {about}")
     print("Built-in poses (handshadow render NAME --out DIR):")
     for name, about in examples.list_poses():
         print(f"  {name:14s} {about}")
     return 0
+
+
+def resolve_device(name: str) -> str:
+    """'cpu', 'cuda' (checked) or 'auto' (CUDA when present)."""
+    import torch
+
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" or name.startswith("cuda:"):
+        if not torch.cuda.is_available():
+            raise HandshadowError("CUDA was asked for but no CUDA device is available here (use --device cpu)")
+        return name
+    if name == "cpu":
+        return name
+    raise HandshadowError(f"unknown device {name!r} (use cpu, cuda or auto)")
+
+
+def cmd_fit(args: argparse.Namespace) -> int:
+    from handshadow.export.files import ResultFolder
+    from handshadow.fit import FitConfig
+
+    if args.size < 32 or args.size > 2048:
+        raise HandshadowError(f"--size must be between 32 and 2048 pixels, got {args.size}")
+    if args.iters is not None and args.iters < 1:
+        raise HandshadowError(f"--iters must be positive, got {args.iters}")
+    out = Path(args.out) if args.out else Path("out") / Path(args.target).stem
+    ResultFolder(out, args.force)  # refuse a non-empty folder before any work
+    from handshadow.pipeline import fit_to_folder, resolve_target
+
+    resolve_target(args.target, 64, 64, args.invert)  # bad targets fail fast, before the models load
+    config = FitConfig(
+        hands=args.hands,
+        size=args.size,
+        iters=args.iters,
+        device=resolve_device(args.device),
+        seed=args.seed,
+        hand_model=args.hand_model,
+        mano_dir=args.mano_dir,
+        limits=args.limits,
+        light=args.light,
+        forearm=not args.no_forearm,
+        quality=args.quality,
+    )
+    if config.hand_model == "mano":
+        from handshadow.hands import load_rig
+
+        for side in ("right", "left"):
+            load_rig("mano", side, None, config.mano_dir)
+    folder, result, lines = fit_to_folder(args.target, out, config, force=args.force, invert=args.invert, show_progress=not args.quiet)
+    s = result.score
+    if not args.quiet:
+        state = "interrupted; best so far" if result.interrupted else ("success" if s.success else "done")
+        print(f"{state}: IoU {s.iou:.3f}, thin parts {s.thin_recall:.2f}, HD95 {s.hd95:.3f}, {result.steps} steps, {result.seconds:.0f} s")
+        for line in lines:
+            print(line)
+        print(f"results in {folder}/ (guide.png shows how to hold your hands)")
+    return EXIT_INTERRUPTED if result.interrupted else 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -50,6 +111,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="write into a non-empty folder")
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl / MANO_LEFT.pkl, for poses that use MANO")
     p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser("fit", help="find hand poses whose shadow matches a target image")
+    p.add_argument("target", help="an image file (PNG, JPEG, GIF, BMP) or a built-in example name")
+    p.add_argument("--hands", default="auto", choices=["1", "2", "auto"], help="number of hands (default: auto)")
+    p.add_argument("--out", help="output folder (default: out/<target name>)")
+    p.add_argument("--size", type=int, default=256, help="frame height and width in pixels (default 256)")
+    p.add_argument("--iters", type=int, help="total optimisation steps (default: set by --quality)")
+    p.add_argument("--quality", default="default", choices=["fast", "default", "best"])
+    p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
+    p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")
+    p.add_argument("--limits", default="anatomical", choices=["anatomical", "paper"], help="joint-limit preset")
+    p.add_argument("--light", default="point", choices=["point", "directional"])
+    p.add_argument("--no-forearm", action="store_true", help="hands without forearms")
+    p.add_argument("--invert", action="store_true", default=None, help="the shape is lighter than the ground (overrides the automatic choice)")
+    p.add_argument("--force", action="store_true", help="write into a non-empty folder")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.set_defaults(func=cmd_fit)
 
     p = sub.add_parser("examples", help="list the built-in examples")
     p.set_defaults(func=cmd_examples)

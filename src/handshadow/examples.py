@@ -1,4 +1,5 @@
-"""Built-in examples shipped with the package: poses (data/poses/*.json)."""
+"""Built-in examples shipped with the package: poses (data/poses/*.json) and target shadows
+(data/examples/*.png, our own renders of library poses, so each has a known answer)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 from handshadow.paths import PACKAGE_DATA
 
 POSES = PACKAGE_DATA / "poses"
+TARGETS = PACKAGE_DATA / "examples"
 
 
 def list_poses() -> list[tuple[str, str]]:
@@ -26,4 +28,22 @@ def pose_path(name_or_path: str) -> Path:
     if path.exists():
         return path
     builtin = POSES / f"{name_or_path}.json"
+    return builtin if builtin.is_file() else path
+
+
+def list_targets() -> list[tuple[str, str]]:
+    """(name, description) of every built-in target."""
+    out = []
+    for path in sorted(TARGETS.glob("*.png")):
+        about_file = path.with_suffix(".txt")
+        out.append((path.stem, about_file.read_text().strip() if about_file.exists() else ""))
+    return out
+
+
+def target_path(name_or_path: str) -> Path:
+    """An image path: an existing file, else the built-in target of that name, else the path."""
+    path = Path(name_or_path)
+    if path.exists():
+        return path
+    builtin = TARGETS / f"{name_or_path}.png"
     return builtin if builtin.is_file() else path

@@ -19,25 +19,37 @@ from handshadow.render.soft import gaussian_blur
 
 @dataclasses.dataclass(frozen=True)
 class TargetMaps:
-    """Per-resolution maps of the target, (H, W) tensors.
+    """Per-resolution maps of the target, (H, W) tensors unless noted.
 
     target: binary target; thin: its thin parts (what an opening of radius 4 % of the height
-    removes); outside_dist: distance to the target outside it, in frame heights (0 inside).
+    removes); outside_dist: distance to the target outside it, in frame heights (0 inside);
+    outside_dist_wide: (3H, 3W) the same over a canvas three frames wide, centred on the frame,
+    for points whose shadow falls outside the frame; thin_points: (N, 2) pixel coordinates
+    (x, y) of up to 256 thin-part pixels (evenly picked).
     """
 
     target: torch.Tensor
     thin: torch.Tensor
     outside_dist: torch.Tensor
+    outside_dist_wide: torch.Tensor
+    thin_points: torch.Tensor
 
     @staticmethod
     def build(target: np.ndarray, device="cpu", dtype=torch.float32) -> TargetMaps:
         target = np.asarray(target, bool)
-        h = target.shape[0]
+        h, w = target.shape
         t = dict(device=device, dtype=dtype)
+        wide = np.zeros((3 * h, 3 * w), bool)
+        wide[h : 2 * h, w : 2 * w] = target
+        thin = thin_parts(target)
+        ys, xs = np.nonzero(thin)
+        pick = np.linspace(0, len(xs) - 1, min(256, len(xs))).astype(int) if len(xs) else np.zeros(0, int)
         return TargetMaps(
             target=torch.as_tensor(target, **t),
-            thin=torch.as_tensor(thin_parts(target), **t),
+            thin=torch.as_tensor(thin, **t),
             outside_dist=torch.as_tensor(ndimage.distance_transform_edt(~target) / h, **t),
+            outside_dist_wide=torch.as_tensor(ndimage.distance_transform_edt(~wide) / h, **t),
+            thin_points=torch.as_tensor(np.stack([xs[pick] + 0.5, ys[pick] + 0.5], 1), **t),
         )
 
 
@@ -84,3 +96,35 @@ def placement(heights_m: torch.Tensor, lo_m: float, hi_m: float, scale_m: float 
 def soft_range(value: torch.Tensor, lo: float, hi: float, scale: float) -> torch.Tensor:
     """Squared overshoot of value (B,) outside [lo, hi], in units of scale. -> (B,)."""
     return ((torch.relu(lo - value) + torch.relu(value - hi)) / scale) ** 2
+
+
+def points_outside(points_xy: torch.Tensor, maps: TargetMaps) -> torch.Tensor:
+    """Mean squared distance (frame heights) to the target of projected points, e.g. the hands'
+    joints and forearm axes: a long-range pull of whole fingers and forearms into the target,
+    which the outline alone cannot give (a forearm leaving the frame has no outline there).
+
+    points_xy (B, P, 2) pixel coordinates -> (B,)."""
+    h, w = maps.target.shape
+    field = maps.outside_dist_wide[None, None]
+    # Canvas coordinates: the frame sits in the middle third; grid_sample wants [-1, 1].
+    gx = (points_xy[..., 0] + w) / (3 * w) * 2 - 1
+    gy = (points_xy[..., 1] + h) / (3 * h) * 2 - 1
+    grid = torch.stack([gx, gy], -1)[:, None]  # (B, 1, P, 2)
+    d = torch.nn.functional.grid_sample(field.expand(points_xy.shape[0], -1, -1, -1), grid, align_corners=False, padding_mode="border")
+    return (d[:, 0, 0] ** 2).mean(1)
+
+
+def thin_coverage(segments_xy: torch.Tensor, maps: TargetMaps) -> torch.Tensor:
+    """Mean squared distance (frame heights) from the target's thin parts to the nearest
+    projected finger segment: fingers are drawn to ears, beaks and antlers wherever they are.
+
+    segments_xy (B, S, 2, 2) pixel coordinates of segment ends -> (B,); 0 without thin parts."""
+    pts = maps.thin_points
+    if pts.shape[0] == 0:
+        return segments_xy.new_zeros(segments_xy.shape[0])
+    a, b = segments_xy[:, None, :, 0], segments_xy[:, None, :, 1]  # (B, 1, S, 2)
+    p = pts[None, :, None, :]  # (1, N, 1, 2)
+    ab = b - a
+    t = (((p - a) * ab).sum(-1) / (ab * ab).sum(-1).clamp(min=1e-9)).clamp(0, 1)
+    d = (p - (a + t[..., None] * ab)).norm(dim=-1).amin(2)  # (B, N)
+    return ((d / maps.target.shape[0]) ** 2).mean(1)

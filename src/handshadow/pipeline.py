@@ -93,6 +93,115 @@ def write_scene_files(folder: ResultFolder, scene: Scene, meshes: list[PosedMesh
     write_png(folder / "scene.png", scene_picture(scene, hands, mask, rays_through=tips))
 
 
+def resolve_target(source: str, width: int, height: int, invert: bool | None = None) -> np.ndarray:
+    """A target frame from an image file or the name of a built-in example."""
+    from handshadow import examples
+    from handshadow.target import load_target
+
+    return load_target(examples.target_path(source), width, height, invert)
+
+
+class FrameRecorder:
+    """Keeps up to ``limit`` snapshots of the search (step, IoU, shadow, poses) for progress.gif."""
+
+    def __init__(self, total_steps: int, limit: int = 36):
+        self.every = max(1, total_steps // limit)
+        self.frames: list = []
+        self._next = 0
+
+    def __call__(self, p) -> None:
+        if p.done >= self._next or p.done == p.total:
+            self.frames.append(p)
+            self._next = p.done + self.every
+
+
+def progress_frames(frames: list, target: np.ndarray, scene: Scene, sides: list[str], pose_set: PoseSet, size: int = 220) -> list[np.ndarray]:
+    """One picture per snapshot: the hands in 3D (from the performer's side) beside their
+    shadow over the target."""
+    from skimage.transform import resize
+
+    from handshadow.export.images import overlay_image
+    from handshadow.export.pictures import performer_view
+
+    models = [load_hand(h.model, h.side, h.shape, None, forearm=pose_set.forearm) for h in pose_set.hands]
+    out = []
+    for f in frames:
+        with torch.no_grad():
+            meshes = [(s, m(*p.args()).vertices[0].cpu().double().numpy(), m.faces.cpu().numpy()) for s, m, p in zip(sides, models, f.poses)]
+        view = performer_view(scene, meshes, size=(size, size), supersample=1)
+        small_target = resize(target.astype(float), f.shadow.shape, order=0) > 0.5
+        ov = overlay_image(small_target, f.shadow > 0.5)
+        ov = (resize(ov.astype(float) / 255, (size, size * ov.shape[1] // ov.shape[0]), order=0) * 255).astype(np.uint8)
+        frame = np.concatenate([view, ov], 1)
+        frame[-14:, :] = 255
+        bar = int(frame.shape[1] * f.done / max(f.total, 1))
+        frame[-10:-4, :bar] = (70, 130, 200)
+        out.append(frame)
+    return out
+
+
+def fit_to_folder(
+    target_source: str,
+    out: str | Path,
+    config,
+    force: bool = False,
+    invert: bool | None = None,
+    show_progress: bool = True,
+):
+    """Fit hands to a target and write the result folder: target.png, shadow.png, overlay.png,
+    scene.json, pose.json, <side>.obj, hands.glb, scene.png, progress.gif, guide.png.
+
+    Ctrl-C during the search stops it and writes the best result so far, completely.
+    Returns (folder, FitResult)."""
+    import sys
+
+    from handshadow.export.files import write_gif
+    from handshadow.export.images import mask_image, overlay_image
+    from handshadow.export.pictures import performer_view
+    from handshadow.fit import fit_frame, schedule
+    from handshadow.guide import describe, guide_image
+    from handshadow.posefile import parse_pose
+
+    ResultFolder(out, force)  # refuse an unusable output folder before the work
+    frame = resolve_target(target_source, config.size, config.size, invert)
+    _, _, stages = schedule(config.quality, config.iters, config.size)
+    total = sum(s.steps for s in stages) * (2 if config.hands == "auto" else 1)
+    recorder = FrameRecorder(total)
+    bar = None
+    if show_progress and sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, desc="fitting", unit="step", leave=False)
+
+    def on_progress(p):
+        recorder(p)
+        if bar is not None:
+            bar.n = min(total, p.done)
+            bar.set_postfix(iou=f"{p.iou:.3f}")
+
+    result = fit_frame(frame, config, progress=on_progress)
+    if bar is not None:
+        bar.close()
+    pose_set = parse_pose(result.pose_set.to_json())  # exactly what pose.json will hold
+    meshes = pose_hands(pose_set, config.mano_dir)
+    mask = exact_shadow(pose_set.scene, meshes)
+    scene = pose_set.scene
+    sides = [h.side for h in pose_set.hands]
+    frames = progress_frames(recorder.frames, frame, scene, sides, pose_set)
+    lines = describe(list(pose_set.hands), scene)
+    hands = [(m.side, m.vertices, m.faces) for m in meshes]
+    guide = guide_image(performer_view(scene, hands, size=(560, 560)), overlay_image(frame, mask > 0.5), lines)
+    with ResultFolder(out, force) as folder:
+        write_png(folder / "target.png", mask_image(frame))
+        write_png(folder / "overlay.png", overlay_image(frame, mask > 0.5))
+        write_scene_files(folder, scene, meshes, mask)
+        write_json(folder / "pose.json", pose_set.to_json())
+        write_gif(folder / "progress.gif", frames)
+        write_png(folder / "guide.png", guide)
+        path = folder.commit()
+    return path, result, lines
+
+
 def render_pose_set(pose_set: PoseSet, out: str | Path, force: bool = False, mano_dir: str | None = None) -> Path:
     """Render a pose file into ``out``: shadow.png, scene.json, <side>.obj, hands.glb, scene.png."""
     meshes = pose_hands(pose_set, mano_dir)

@@ -30,6 +30,9 @@ from handshadow.render import ShadowRenderer, gaussian_blur
 from handshadow.scene import Scene
 
 log = logging.getLogger(__name__)
+# Finger segments between keypoints (rig.KEYPOINT_NAMES: wrist, then per finger 3 joints + tip).
+_SEG_A = [1 + 4 * f + k for f in range(5) for k in range(3)]
+_SEG_B = [2 + 4 * f + k for f in range(5) for k in range(3)]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +46,7 @@ class Stage:
     steps: int
     keep: int
     lr_scale: float = 1.0
+    skeleton: float = 1.0  # weight factor of the skeleton terms (long-range guides)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,6 +58,8 @@ class Weights:
     penetration: float = 0.02
     placement: float = 0.05
     forearm: float = 0.05
+    inside: float = 3.0  # joints and forearm axes project into the target
+    thin_pull: float = 3.0  # fingers reach the target's thin parts
 
 
 @dataclasses.dataclass
@@ -209,6 +215,18 @@ class Searcher:
         total = total + w.excess * losses.excess(mask, maps.outside_dist)
         if w.attraction and stage.attract_px > 0:
             total = total + w.attraction * losses.attraction(mask, maps.target, stage.attract_px * scale)
+        if stage.skeleton > 0:
+            kp = torch.cat([torch.cat([o.keypoints, o.forearm_points], 1) for o in outs], 1)
+            kp_xy, _ = scene.project(kp)
+            total = total + stage.skeleton * w.inside * losses.points_outside(kp_xy, maps)
+            segs = kp_xy.new_zeros(kp_xy.shape[0], 0, 2, 2)
+            offset = 0
+            for o in outs:
+                k = kp_xy[:, offset : offset + 21]
+                ends = torch.stack([k[:, _SEG_A], k[:, _SEG_B]], 2)
+                segs = torch.cat([segs, ends], 1)
+                offset += o.keypoints.shape[1] + o.forearm_points.shape[1]
+            total = total + stage.skeleton * w.thin_pull * losses.thin_coverage(segs, maps)
         centres = self.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
         total = total + w.penetration * losses.penetration(self.penetration.depths(centres))
         total = total + w.placement * losses.placement(height, *self.height_range)
@@ -216,20 +234,13 @@ class Searcher:
         return total, mask
 
     def _forearm_terms(self, outs, globals_) -> torch.Tensor:
-        """Forearms come from a body behind the hands: they must not point into the wall, and
-        two wrists stay within reach of each other (at most 45 cm apart)."""
-        n = torch.as_tensor(self.scene.wall.normal, dtype=self.dtype, device=self.device)
-        out = 0
-        for hand, o, (rot, _) in zip(self.hands, outs, globals_):
-            if hand.forearm_bone is None:
-                continue
-            # The forearm's direction toward the elbow: the hand frame's -y turned by the wrist.
-            proximal = -(rot @ o.bone_rotations[:, hand.forearm_bone])[:, :, 1]
-            out = out + losses.soft_range(proximal @ n, -0.2, 1.0, 0.2)
-        if len(globals_) == 2:
-            gap = (globals_[0][1] - globals_[1][1]).norm(dim=1)
-            out = out + losses.soft_range(gap, 0.0, 0.45, 0.05)
-        return out
+        """Two wrists stay within reach of each other (at most 45 cm apart). Forearms may point
+        any way, into the wall included (a forearm along the light's ray hides behind its hand;
+        the performer then stands beside the beam)."""
+        if len(globals_) < 2:
+            return torch.zeros((), dtype=self.dtype, device=self.device)
+        gap = (globals_[0][1] - globals_[1][1]).norm(dim=1)
+        return losses.soft_range(gap, 0.0, 0.45, 0.05)
 
     def run(
         self,

@@ -72,6 +72,14 @@ def write_json(path: Path, data: dict) -> None:
     Path(path).write_text(json.dumps(data, indent=1) + "\n")
 
 
+def write_gif(path: Path, frames: list[np.ndarray], seconds_per_frame: float = 0.12, hold_last_s: float = 1.5) -> None:
+    """An animated GIF that loops; the last frame is held a little longer."""
+    if not frames:
+        return
+    durations = [seconds_per_frame * 1000] * (len(frames) - 1) + [hold_last_s * 1000]
+    iio.imwrite(path, np.stack(frames), extension=".gif", duration=durations, loop=0)
+
+
 def shadow_image(mask: np.ndarray) -> np.ndarray:
     """(H, W) mask in [0, 1] -> uint8 black shadow on a white wall."""
     return ((1.0 - np.clip(mask, 0, 1)) * 255 + 0.5).astype(np.uint8)

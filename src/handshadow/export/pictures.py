@@ -60,7 +60,7 @@ def scene_picture(
 
 
 def performer_view(
-    scene: Scene, hands: list[tuple[str, np.ndarray, np.ndarray]], size: tuple[int, int] = (640, 640)
+    scene: Scene, hands: list[tuple[str, np.ndarray, np.ndarray]], size: tuple[int, int] = (640, 640), supersample: int = 2
 ) -> np.ndarray:
     """The hands as the performer sees them: from just behind and above the lamp, looking at
     the wall, so left is left and right is right. Returns (H, W, 3) uint8."""
@@ -73,7 +73,7 @@ def performer_view(
     extent = np.percentile(np.linalg.norm(pts - target, axis=1), 90)
     eye = target + normal * max(0.45, 3.2 * extent) + up * 0.25 * max(0.45, 3.2 * extent)
     camera = Camera(tuple(eye), tuple(target), tuple(up), fov_deg=45.0, width=size[0], height=size[1])
-    return render_view(meshes, camera, background=(1.0, 1.0, 1.0))
+    return render_view(meshes, camera, background=(1.0, 1.0, 1.0), supersample=supersample)
 
 
 def up_dir(scene: Scene) -> np.ndarray:

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from handshadow.hands import kinematics
-from handshadow.hands.forearm import attach_forearm, cap_wrist, wrist_centre
+from handshadow.hands.forearm import FOREARM_LENGTH_M, attach_forearm, cap_wrist, forearm_axis, wrist_centre
 from handshadow.hands.rig import N_JOINTS, HandRig
 
 
@@ -24,7 +24,9 @@ class HandOutput:
     keypoints: (B, 21, 3) wrist, then per finger (thumb..little) its 3 joints and its tip
     (KEYPOINT_NAMES order);
     bone_rotations (B, K, 3, 3), bone_translations (B, K, 3): each bone's rigid transform of
-    rest points, hand frame (before the global rotation and translation).
+    rest points, hand frame (before the global rotation and translation);
+    forearm_points: (B, P, 3) points along the forearm's axis from the wrist to the elbow
+    (P = 0 without a forearm).
     """
 
     vertices: torch.Tensor
@@ -32,6 +34,7 @@ class HandOutput:
     keypoints: torch.Tensor
     bone_rotations: torch.Tensor
     bone_translations: torch.Tensor
+    forearm_points: torch.Tensor
 
 
 class HandModel(torch.nn.Module):
@@ -54,6 +57,12 @@ class HandModel(torch.nn.Module):
         verts, faces, weights = attach_forearm(rig) if forearm else cap_wrist(rig)
         self.forearm_bone = len(rig.bone_parents) if forearm else None  # an extra bone, last
         self.register_buffer("wrist_centre", torch.as_tensor(wrist_centre(rig) if forearm else np.zeros(3), dtype=dtype))
+        if forearm:
+            centre, axis = forearm_axis(rig)
+            axis_points = centre + np.linspace(0.04, FOREARM_LENGTH_M, 6)[:, None] * axis
+        else:
+            axis_points = np.zeros((0, 3))
+        self.register_buffer("forearm_axis_points", torch.as_tensor(axis_points, dtype=dtype))
         # Deviation toward the thumb turns the forearm toward the little finger: mirrored sides.
         self.radial_sign = 1.0 if rig.side == "right" else -1.0
         self.has_forearm = forearm
@@ -114,10 +123,12 @@ class HandModel(torch.nn.Module):
         bone_r, bone_t = kinematics.forward_kinematics(
             joint_rotations, self.joint_bones, self.bone_heads, self.bone_parents
         )
+        forearm_points = self.forearm_axis_points.expand(batch, -1, -1)
         if self.forearm_bone is not None:
             fr, ft = self._forearm_transform(wrist_rad, batch, joint_rotations)
             bone_r = torch.cat([bone_r, fr[:, None]], 1)
             bone_t = torch.cat([bone_t, ft[:, None]], 1)
+            forearm_points = forearm_points @ fr.transpose(-1, -2) + ft[:, None]
         verts = kinematics.linear_blend_skinning(rest, self.skin_weights, bone_r, bone_t)
         # Keypoints: a joint's own transform leaves its centre where its parent put it.
         heads = self.bone_heads[self.joint_bones]
@@ -135,7 +146,8 @@ class HandModel(torch.nn.Module):
             translation = torch.zeros_like(verts[:, 0]) if translation is None else translation
             verts = kinematics.apply_rigid(verts, rotation, translation)
             keypoints = kinematics.apply_rigid(keypoints, rotation, translation)
-        return HandOutput(verts, self.faces, keypoints, bone_r, bone_t)
+            forearm_points = kinematics.apply_rigid(forearm_points, rotation, translation)
+        return HandOutput(verts, self.faces, keypoints, bone_r, bone_t, forearm_points)
 
     def _forearm_transform(self, wrist_rad, batch, like) -> tuple[torch.Tensor, torch.Tensor]:
         """The forearm bone's rotation (B, 3, 3) and translation (B, 3) in the hand frame: the

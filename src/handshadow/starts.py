@@ -1,0 +1,245 @@
+"""Where the search starts: library poses and random hands, placed over the target.
+
+Each candidate (one or two posed hands) is rendered small; its shadow is matched to the target
+by a 2D similarity (rotation about the lamp's foot, scale, shift) found by trying rotations and
+scales and aligning centroids. The similarity maps back to 3D exactly for the rotation (turning
+the hands about the lamp's axis turns the shadow), and closely for scale (moving the hands along
+the lamp's axis changes their magnification) and shift (moving them parallel to the wall).
+Mirror images (swapping left and right hands) double the candidates.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from handshadow.hands.rig import FINGERS
+from handshadow.library import library_names, load_library_pose
+from handshadow.search import HandPoses, Limits
+
+MIRROR = torch.diag(torch.tensor([-1.0, 1.0, 1.0]))
+
+
+@dataclasses.dataclass
+class Candidates:
+    """B candidate hypotheses: per hand slot (right first when two hands) their HandPoses, and
+    where each came from ('library:<name>', 'random', ...)."""
+
+    hands: list[HandPoses]
+    origin: list[str]
+
+    @property
+    def batch(self) -> int:
+        return self.hands[0].pose_rad.shape[0]
+
+    def select(self, idx) -> Candidates:
+        idx = list(idx)
+        return Candidates([h.select(torch.as_tensor(idx)) for h in self.hands], [self.origin[i] for i in idx])
+
+    @staticmethod
+    def cat(items: list[Candidates]) -> Candidates:
+        hands = [HandPoses.cat([c.hands[k] for c in items]) for k in range(len(items[0].hands))]
+        return Candidates(hands, [o for c in items for o in c.origin])
+
+
+def library_candidates(n_hands: int, sides: list[str], dtype=torch.float32) -> Candidates:
+    """Library poses with the requested number of hands, in the order of ``sides``; a one-hand
+    pose of the other side is mirrored to fit, and every pose also comes mirrored."""
+    out_hands: list[list[HandPoses]] = [[] for _ in sides]
+    origin = []
+    for name in library_names():
+        pose_set = load_library_pose(name)
+        if len(pose_set.hands) != n_hands:
+            continue
+        by_side = {h.side: h for h in pose_set.hands}
+        for mirrored in (False, True):
+            picked = []
+            for side in sides:
+                source_side = side if not mirrored else ("left" if side == "right" else "right")
+                h = by_side.get(source_side)
+                if h is None:  # one-hand pose of the other side: use its mirror image
+                    h = next(iter(by_side.values()))
+                    mirror_this = h.side != side
+                else:
+                    mirror_this = mirrored
+                picked.append(_hand_poses(h, mirror_this, dtype))
+            for k, hp in enumerate(picked):
+                out_hands[k].append(hp)
+            origin.append(f"library:{name}" + (":mirrored" if mirrored else ""))
+    return Candidates([HandPoses.cat(h) for h in out_hands], origin)
+
+
+def _hand_poses(h, mirrored: bool, dtype) -> HandPoses:
+    rot = torch.as_tensor(h.rotation, dtype=dtype)
+    trans = torch.as_tensor(h.translation, dtype=dtype)
+    if mirrored:
+        m = MIRROR.to(dtype)
+        rot, trans = m @ rot @ m, m @ trans
+    return HandPoses(
+        torch.as_tensor(np.radians(h.pose_deg), dtype=dtype)[None],
+        rot[None],
+        trans[None],
+        torch.as_tensor(np.radians(h.wrist_deg), dtype=dtype)[None],
+    )
+
+
+def random_candidates(n: int, sides: list[str], limits: list[Limits], rng: np.random.Generator, depth_m: float = 1.0, dtype=torch.float32) -> Candidates:
+    """n random hypotheses: each finger extended, half bent or curled; hands facing the wall,
+    the lamp or sideways, pointing any way in the wall plane; two hands side by side."""
+    hands = []
+    for k, (side, lim) in enumerate(zip(sides, limits)):
+        lo, hi = lim.joints[..., 0].numpy(), lim.joints[..., 1].numpy()
+        pose = np.zeros((n, 15, 3))
+        for f in range(len(FINGERS)):
+            mode = rng.choice(3, size=n, p=[0.5, 0.25, 0.25])
+            bend = np.array([0.0, 45.0, 85.0])[mode][:, None] + rng.normal(0, 8, (n, 3))
+            pose[:, 3 * f : 3 * f + 3, 2] = np.radians(bend * np.array([1.0, 1.1, 0.8]))
+            pose[:, 3 * f, 1] = np.radians(rng.normal(0, 10, n))
+        pose = np.clip(pose, lo, hi)
+        wlo, whi = lim.wrist[:, 0].numpy(), lim.wrist[:, 1].numpy()
+        wrist = np.clip(np.radians(rng.normal(0, 25, (n, 2))), wlo, whi)
+        rots = []
+        for _ in range(n):
+            angle = rng.uniform(0, 2 * math.pi)
+            fingers = np.array([math.cos(angle), math.sin(angle), rng.normal(0, 0.2)])
+            face = rng.choice(3, p=[0.5, 0.3, 0.2])
+            back = [np.array([0, 0, 1.0]), np.array([0, 0, -1.0]), np.cross(fingers, [0, 0, 1.0]) * rng.choice([-1, 1])][face]
+            rots.append(_frame(fingers, back + rng.normal(0, 0.15, 3)))
+        x = (0.06 if side == "right" else -0.06) if len(sides) == 2 else 0.0
+        trans = np.stack([np.full(n, x), np.full(n, -0.08), np.full(n, depth_m)], 1) + rng.normal(0, [0.03, 0.03, 0.05], (n, 3))
+        hands.append(HandPoses(*(torch.as_tensor(a, dtype=dtype) for a in (pose, np.stack(rots), trans, wrist))))
+    return Candidates(hands, ["random"] * n)
+
+
+def _frame(fingers, back) -> np.ndarray:
+    y = fingers / np.linalg.norm(fingers)
+    z = back - y * (back @ y)
+    z /= np.linalg.norm(z)
+    return np.stack([np.cross(y, z), y, z], 1)
+
+
+def similarity_align(
+    shadows: torch.Tensor, target: torch.Tensor, pivot: tuple[float, float], angles_deg: np.ndarray, scales: np.ndarray
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Best 2D similarity per shadow, about a pivot.
+
+    Args:
+        shadows: (B, H, W) candidate shadows; target: (H, W).
+        pivot: (x, y) pixel coordinates the rotation and scale turn about (the lamp's foot).
+        angles_deg: rotations to try; scales: scale factors to try (times the area ratio).
+    Returns:
+        angle (B,) radians, scale (B,), shift (B, 2) pixels (x, y), and the IoU (B,) reached.
+    A shadow point q (pixels from the pivot) goes to scale * R(angle) q + shift.
+    """
+    b, h, w = shadows.shape
+    yy, xx = torch.meshgrid(torch.arange(h, dtype=shadows.dtype) + 0.5 - pivot[1], torch.arange(w, dtype=shadows.dtype) + 0.5 - pivot[0], indexing="ij")
+    area = shadows.sum((1, 2)).clamp(min=1)
+    t_area = target.sum().clamp(min=1)
+    c_s = torch.stack([(shadows * xx).sum((1, 2)) / area, (shadows * yy).sum((1, 2)) / area], 1)
+    c_t = torch.stack([(target * xx).sum() / t_area, (target * yy).sum() / t_area])
+    base = torch.sqrt(t_area / area)
+    best = (torch.full((b,), -1.0), torch.zeros(b), torch.ones(b), torch.zeros(b, 2))
+    for a in np.radians(angles_deg):
+        rot = torch.tensor([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]], dtype=shadows.dtype)
+        for s in scales:
+            scale = base * s
+            # Centroid after rotation and scale, then shift onto the target's centroid.
+            shift = c_t[None] - scale[:, None] * (c_s @ rot.T)
+            warped = _warp(shadows, rot, scale, shift, pivot)
+            inter = (warped * target).sum((1, 2))
+            iou = inter / (warped.sum((1, 2)) + t_area - inter).clamp(min=1e-6)
+            better = iou > best[0]
+            best = (
+                torch.where(better, iou, best[0]),
+                torch.where(better, torch.full_like(iou, a), best[1]),
+                torch.where(better, scale, best[2]),
+                torch.where(better[:, None], shift, best[3]),
+            )
+    return best[1], best[2], best[3], best[0]
+
+
+def _warp(images, rot, scale, shift, pivot):
+    """Resample images (B, H, W) under q -> scale R q + shift (pixels from the pivot)."""
+    b, h, w = images.shape
+    # grid_sample wants, for each output pixel, its source: q_src = R^T (q_out - shift) / scale.
+    inv = rot.T[None] / scale[:, None, None]
+    to_norm = torch.tensor([2.0 / w, 2.0 / h], dtype=images.dtype)
+    theta = torch.zeros(b, 2, 3, dtype=images.dtype)
+    # Normalised coordinates n = D (q + c0), c0 = pivot - centre: q_src_n = D inv D^-1 n_out
+    # + D (c0 - inv (c0 + shift)).
+    d = torch.diag(to_norm)
+    d_inv = torch.diag(1 / to_norm)
+    c0 = torch.tensor([pivot[0] - w / 2, pivot[1] - h / 2], dtype=images.dtype)
+    theta[:, :, :2] = d @ inv @ d_inv
+    theta[:, :, 2] = (d @ (c0[None, :, None] - inv @ (c0[None] + shift)[..., None]))[..., 0]
+    grid = F.affine_grid(theta, (b, 1, h, w), align_corners=False)
+    return F.grid_sample(images[:, None], grid, mode="bilinear", padding_mode="zeros", align_corners=False)[:, 0]
+
+
+def apply_similarity(
+    cand: Candidates, angle: torch.Tensor, scale: torch.Tensor, shift_px: torch.Tensor, scene, frame_px: int
+) -> Candidates:
+    """Move the candidates' hands so that their shadows undergo the 2D similarity.
+
+    shift_px is in pixels of a frame frame_px pixels high. Rotation: about the wall normal
+    through the lamp (the frame centre's normal for a directional light). Scale: for a point
+    light, a move along the lamp's axis to magnification times scale (directional lights keep
+    the size). Shift: a move parallel to the wall by shift / magnification.
+    """
+    n = torch.as_tensor(scene.wall.normal, dtype=angle.dtype)
+    metres_per_px = float(np.linalg.norm(scene.image.v)) / frame_px
+    u = torch.as_tensor(np.asarray(scene.image.u) / np.linalg.norm(scene.image.u), dtype=angle.dtype)
+    v = torch.as_tensor(np.asarray(scene.image.v) / np.linalg.norm(scene.image.v), dtype=angle.dtype)
+    # A rotation by +angle in image coordinates (x right, y down) turns about the wall normal by
+    # -angle when the image's v points down the wall (the usual frame).
+    handed = torch.sign(torch.cross(u, v, dim=0) @ n)
+    rot = _axis_rotation(n, -angle * handed)  # (B, 3, 3)
+    point = scene.light.type == "point"
+    lamp_h = float((np.asarray(scene.light.position) - np.asarray(scene.wall.point)) @ np.asarray(scene.wall.normal)) if point else None
+    axis_point = torch.as_tensor(pivot_point(scene), dtype=angle.dtype)
+    hands = []
+    mean_h = torch.stack([((h.translation - torch.as_tensor(scene.wall.point, dtype=angle.dtype)) @ n) for h in cand.hands]).mean(0)
+    if point:
+        mag = lamp_h / (lamp_h - mean_h)
+        new_h = lamp_h - lamp_h / (mag * scale)
+        new_h = new_h.clamp(0.15, lamp_h - 0.35)
+        dz = new_h - mean_h
+        new_mag = lamp_h / (lamp_h - new_h)
+    else:
+        dz = torch.zeros_like(scale)
+        new_mag = torch.ones_like(scale)
+    shift_m = (shift_px[:, :1] * u + shift_px[:, 1:] * v) * metres_per_px / new_mag[:, None]
+    for h in cand.hands:
+        rel = h.translation - axis_point
+        t = (rot @ rel[..., None])[..., 0] + axis_point + dz[:, None] * n + shift_m
+        hands.append(HandPoses(h.pose_rad, rot @ h.rotation, t, h.wrist_rad))
+    return Candidates(hands, cand.origin)
+
+
+def pivot_point(scene) -> np.ndarray:
+    """(3,) the point the alignment turns about: the lamp (point light) or the frame centre."""
+    if scene.light.type == "point":
+        return np.asarray(scene.light.position, float)
+    return np.asarray(scene.image.origin) + 0.5 * np.asarray(scene.image.u) + 0.5 * np.asarray(scene.image.v)
+
+
+def pivot_pixel(scene, frame_px: int) -> tuple[float, float]:
+    """(x, y) pixel coordinates, in a frame frame_px high, of the pivot's foot on the wall."""
+    import torch as _torch
+
+    p = np.asarray(pivot_point(scene), float)
+    n = np.asarray(scene.wall.normal, float)
+    foot = p - n * ((p - np.asarray(scene.wall.point)) @ n)
+    small = scene.with_size(max(1, round(scene.image.width * frame_px / scene.image.height)), frame_px)
+    xy = small.project(_torch.as_tensor(foot + 1e-3 * n)[None])[0][0]
+    return float(xy[0]), float(xy[1])
+
+
+def _axis_rotation(axis: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
+    from handshadow.hands.kinematics import rotvec_to_rotmat
+
+    return rotvec_to_rotmat(axis[None] * angle[:, None])

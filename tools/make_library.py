@@ -1,0 +1,257 @@
+"""Author the library of classic hand-shadow poses (src/handshadow/data/library/*.json) and
+render a contact sheet of their shadows (out/library.png) to look at.
+
+Conventions (docs/conventions.md): world +y up, +x right as the performer sees the wall, the
+lamp at +z. A hand frame has +y toward the fingertips and +z out of the back of the hand; the
+identity rotation holds a hand up, fingers to the ceiling, palm to the wall. Finger angles are
+(twist, spread, bend) degrees: bend flexes toward the palm, spread moves toward the thumb.
+Wrist: (flexion toward the palm, deviation toward the thumb) degrees.
+
+Run:  .venv/bin/python tools/make_library.py
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from handshadow.library import LIBRARY
+from handshadow.scene import Scene
+
+FINGERS = ("thumb", "index", "middle", "ring", "little")
+STRAIGHT = ((0, 0, 0), (0, 0, 0), (0, 0, 0))
+CURLED = ((0, 0, 80), (0, 0, 95), (0, 0, 60))
+HALF = ((0, 0, 40), (0, 0, 45), (0, 0, 30))
+
+
+def frame(fingers_to, back_to) -> np.ndarray:
+    """Rotation putting the hand's +y (fingers) along fingers_to and +z (back) toward back_to."""
+    y = np.asarray(fingers_to, float)
+    y /= np.linalg.norm(y)
+    z = np.asarray(back_to, float)
+    z = z - y * (z @ y)
+    z /= np.linalg.norm(z)
+    return np.stack([np.cross(y, z), y, z], 1)
+
+
+def hand(side, rotation, translation, fingers=None, wrist=(0, 0)):
+    pose = np.zeros((15, 3))
+    for name, joints in (fingers or {}).items():
+        f = FINGERS.index(name)
+        pose[3 * f : 3 * f + 3] = np.asarray(joints, float)
+    rot = rotation if isinstance(rotation, np.ndarray) else Rotation.from_euler("xyz", rotation, degrees=True).as_matrix()
+    return {
+        "side": side,
+        "model": "anny",
+        "shape": {},
+        "pose_deg": pose.round(3).tolist(),
+        "wrist_deg": list(map(float, wrist)),
+        "rotation": np.asarray(rot).round(9).tolist(),
+        "translation": list(map(float, translation)),
+    }
+
+
+def deg(a):
+    return np.radians(a)
+
+
+def direction(angle_deg, z=0.0):
+    """A unit vector in the wall plane at angle_deg from +x (counter-clockwise), tilted by z."""
+    return (np.cos(deg(angle_deg)), np.sin(deg(angle_deg)), z)
+
+
+POSES = {
+    "rabbit": (
+        "Bunny: fist with two fingers up as the ears, thumb meeting the ring finger as the face.",
+        [
+            hand(
+                "right",
+                frame(direction(100), (0.3, 0, 1)),
+                (0.0, -0.08, 1.0),
+                {
+                    "index": ((0, 6, 0), (0, 0, 5), (0, 0, 5)),
+                    "middle": ((0, -10, 0), (0, 0, 5), (0, 0, 5)),
+                    "ring": CURLED,
+                    "little": CURLED,
+                    "thumb": ((10, 10, 40), (0, 0, 35), (0, 0, 30)),
+                },
+                wrist=(10, 0),
+            )
+        ],
+    ),
+    "dog": (
+        "Dog: hand sideways, thumb up as the ear, little finger dropped as the jaw.",
+        [
+            hand(
+                "right",
+                frame(direction(0), (0, 0, 1)),
+                (-0.05, 0.0, 1.0),
+                {
+                    "thumb": ((0, 40, 0), (0, 0, 0), (0, 0, 0)),
+                    "index": ((0, -4, 5), (0, 0, 5), (0, 0, 5)),
+                    "middle": ((0, -2, 5), (0, 0, 5), (0, 0, 5)),
+                    "ring": ((0, 2, 5), (0, 0, 5), (0, 0, 5)),
+                    "little": ((0, -20, 10), (0, 0, 10), (0, 0, 5)),
+                },
+                wrist=(0, -10),
+            )
+        ],
+    ),
+    "bird": (
+        "Bird: hands crossed at the wrists, palms to the lamp, thumbs linked as the head, fingers as wings.",
+        [
+            hand(
+                "right",
+                frame(direction(145), (0, 0, -1)),
+                (0.03, -0.05, 1.0),
+                {"thumb": ((0, 35, 0), (0, 0, 10), (0, 0, 10)), "index": ((0, 10, 0),) + STRAIGHT[1:], "ring": ((0, -8, 0),) + STRAIGHT[1:], "little": ((0, -16, 0),) + STRAIGHT[1:]},
+                wrist=(0, 10),
+            ),
+            hand(
+                "left",
+                frame(direction(35), (0, 0, -1)),
+                (-0.03, -0.05, 1.0),
+                {"thumb": ((0, 35, 0), (0, 0, 10), (0, 0, 10)), "index": ((0, 10, 0),) + STRAIGHT[1:], "ring": ((0, -8, 0),) + STRAIGHT[1:], "little": ((0, -16, 0),) + STRAIGHT[1:]},
+                wrist=(0, 10),
+            ),
+        ],
+    ),
+    "swan": (
+        "Swan: the forearm upright as the neck, the hand bent down at the wrist as the head and beak.",
+        [
+            hand(
+                "right",
+                frame(direction(-15), (0, 1, 0.3)),
+                (-0.02, 0.08, 1.0),
+                {"thumb": ((0, -5, 20), (0, 0, 10), (0, 0, 0)), "index": ((0, -3, 10),) + STRAIGHT[1:], "little": ((0, 3, 10),) + STRAIGHT[1:]},
+                wrist=(75, 0),
+            )
+        ],
+    ),
+    "deer": (
+        "Deer: one hand as the head, the other behind it with spread fingers as the antlers.",
+        [
+            hand(
+                "right",
+                frame(direction(-10), (0, 0, 1)),
+                (0.0, -0.05, 1.0),
+                {"thumb": ((0, 10, 10), (0, 0, 0), (0, 0, 0)), "index": ((0, -4, 5),) + STRAIGHT[1:], "ring": ((0, 2, 5),) + STRAIGHT[1:], "little": ((0, 4, 5),) + STRAIGHT[1:]},
+                wrist=(0, 0),
+            ),
+            hand(
+                "left",
+                frame(direction(95), (0, 0, 1)),
+                (-0.05, 0.02, 0.95),
+                {"thumb": ((0, 30, 0),) + STRAIGHT[1:], "index": ((0, 20, 0),) + STRAIGHT[1:], "middle": ((0, 5, 0),) + STRAIGHT[1:], "ring": ((0, -12, 0),) + STRAIGHT[1:], "little": ((0, -20, 0),) + STRAIGHT[1:]},
+                wrist=(0, 0),
+            ),
+        ],
+    ),
+    "wolf": (
+        "Wolf: both hands, palms together: the top hand's fingers the snout, its thumb the ear, the lower hand the jaw.",
+        [
+            hand(
+                "right",
+                frame(direction(5), (0, 0, 1)),
+                (-0.04, 0.01, 1.0),
+                {"thumb": ((0, 35, 0), (0, 0, 0), (0, 0, 0)), "index": ((0, -4, 0),) + STRAIGHT[1:], "ring": ((0, 4, 0),) + STRAIGHT[1:], "little": ((0, 8, 0),) + STRAIGHT[1:]},
+            ),
+            hand(
+                "left",
+                frame(direction(-8), (0, 0, -1)),
+                (-0.04, -0.035, 0.97),
+                {"thumb": ((0, 0, 40), (0, 0, 40), (0, 0, 30)), "index": ((0, -3, 10),) + STRAIGHT[1:], "ring": ((0, 3, 10),) + STRAIGHT[1:], "little": ((0, 6, 10),) + STRAIGHT[1:]},
+            ),
+        ],
+    ),
+    "duck": (
+        "Duck: fingers together as the upper bill, thumb below as the lower bill.",
+        [
+            hand(
+                "right",
+                frame(direction(5), (0, 0, 1)),
+                (-0.05, 0.0, 1.0),
+                {"thumb": ((0, -10, 30), (0, 0, 10), (0, 0, 0)), "index": ((0, -4, 15), (0, 0, 20), (0, 0, 10)), "middle": ((0, 0, 15), (0, 0, 20), (0, 0, 10)), "ring": ((0, 4, 15), (0, 0, 20), (0, 0, 10)), "little": ((0, 8, 15), (0, 0, 20), (0, 0, 10))},
+                wrist=(-20, 0),
+            )
+        ],
+    ),
+    "crocodile": (
+        "Crocodile: hands stacked, fingers forward as the jaws, slightly open.",
+        [
+            hand("right", frame(direction(8), (0, 1, 0.4)), (-0.06, 0.0, 1.0), {"index": ((0, -3, 0),) + STRAIGHT[1:], "ring": ((0, 3, 0),) + STRAIGHT[1:], "little": ((0, 6, 0),) + STRAIGHT[1:], "thumb": ((0, -10, 20),) + STRAIGHT[1:]}),
+            hand("left", frame(direction(-8), (0, -1, 0.4)), (-0.06, -0.05, 0.98), {"index": ((0, -3, 0),) + STRAIGHT[1:], "ring": ((0, 3, 0),) + STRAIGHT[1:], "little": ((0, 6, 0),) + STRAIGHT[1:], "thumb": ((0, -10, 20),) + STRAIGHT[1:]}),
+        ],
+    ),
+    "butterfly": (
+        "Butterfly: palms to the lamp, hands crossed at the thumbs, fingers spread wide.",
+        [
+            hand("right", frame(direction(125), (0, 0, -1)), (0.05, -0.1, 1.0), {"thumb": ((0, 30, 10),) + STRAIGHT[1:], "index": ((0, 18, 0),) + STRAIGHT[1:], "middle": ((0, 4, 0),) + STRAIGHT[1:], "ring": ((0, -10, 0),) + STRAIGHT[1:], "little": ((0, -25, 0),) + STRAIGHT[1:]}),
+            hand("left", frame(direction(55), (0, 0, -1)), (-0.05, -0.1, 1.0), {"thumb": ((0, 30, 10),) + STRAIGHT[1:], "index": ((0, 18, 0),) + STRAIGHT[1:], "middle": ((0, 4, 0),) + STRAIGHT[1:], "ring": ((0, -10, 0),) + STRAIGHT[1:], "little": ((0, -25, 0),) + STRAIGHT[1:]}),
+        ],
+    ),
+    "snail": (
+        "Snail: a fist as the shell, the other hand's index and middle up as the feelers.",
+        [
+            hand("right", frame(direction(60), (0.2, 0, 1)), (0.04, -0.06, 1.0), {"thumb": ((0, 0, 30), (0, 0, 40), (0, 0, 40)), "index": CURLED, "middle": CURLED, "ring": CURLED, "little": CURLED}, wrist=(30, 0)),
+            hand("left", frame(direction(80), (0, 0, 1)), (-0.05, -0.1, 0.97), {"thumb": ((0, 0, 40), (0, 0, 40), (0, 0, 30)), "index": ((0, 8, 0),) + STRAIGHT[1:], "middle": ((0, -8, 0),) + STRAIGHT[1:], "ring": CURLED, "little": CURLED}),
+        ],
+    ),
+    "eagle": (
+        "Eagle: wrists crossed, palms to the wall, thumbs up as the head, fingers spread as the wings.",
+        [
+            hand("right", frame(direction(160), (0, 0, 1)), (0.02, -0.08, 1.0), {"thumb": ((0, 45, 0),) + STRAIGHT[1:], "index": ((0, 12, 0),) + STRAIGHT[1:], "ring": ((0, -10, 0),) + STRAIGHT[1:], "little": ((0, -20, 0),) + STRAIGHT[1:]}),
+            hand("left", frame(direction(20), (0, 0, 1)), (-0.02, -0.08, 1.0), {"thumb": ((0, 45, 0),) + STRAIGHT[1:], "index": ((0, 12, 0),) + STRAIGHT[1:], "ring": ((0, -10, 0),) + STRAIGHT[1:], "little": ((0, -20, 0),) + STRAIGHT[1:]}),
+        ],
+    ),
+    "heart": (
+        "Heart: both hands, fingers curled over to meet at the top, thumbs meeting below.",
+        [
+            hand("right", frame(direction(110), (0, 0, 1)), (0.05, -0.09, 1.0), {"thumb": ((0, 20, 10), (0, 0, 10), (0, 0, 10)), "index": HALF, "middle": HALF, "ring": HALF, "little": HALF}, wrist=(0, -10)),
+            hand("left", frame(direction(70), (0, 0, 1)), (-0.05, -0.09, 1.0), {"thumb": ((0, 20, 10), (0, 0, 10), (0, 0, 10)), "index": HALF, "middle": HALF, "ring": HALF, "little": HALF}, wrist=(0, -10)),
+        ],
+    ),
+    "spider": (
+        "Spider: palms to the lamp, hands crossed, thumbs hooked, fingers bent as legs.",
+        [
+            hand("right", frame(direction(100), (0, 0, -1)), (0.03, -0.1, 1.0), {"thumb": ((0, 30, 20),) + STRAIGHT[1:], "index": ((0, 15, 30), (0, 0, 40), (0, 0, 20)), "middle": ((0, 5, 30), (0, 0, 40), (0, 0, 20)), "ring": ((0, -8, 30), (0, 0, 40), (0, 0, 20)), "little": ((0, -18, 30), (0, 0, 40), (0, 0, 20))}),
+            hand("left", frame(direction(80), (0, 0, -1)), (-0.03, -0.1, 1.0), {"thumb": ((0, 30, 20),) + STRAIGHT[1:], "index": ((0, 15, 30), (0, 0, 40), (0, 0, 20)), "middle": ((0, 5, 30), (0, 0, 40), (0, 0, 20)), "ring": ((0, -8, 30), (0, 0, 40), (0, 0, 20)), "little": ((0, -18, 30), (0, 0, 40), (0, 0, 20))}),
+        ],
+    ),
+    "goose": (
+        "Goose: the arm raised as the neck, the hand bent forward at the wrist, thumb and fingers as the bill.",
+        [
+            hand("right", frame(direction(10), (0, 1, 0.2)), (-0.02, 0.1, 1.0), {"thumb": ((0, -10, 10),) + STRAIGHT[1:], "index": ((0, -3, 25), (0, 0, 20), (0, 0, 10)), "middle": ((0, 0, 25), (0, 0, 20), (0, 0, 10)), "ring": ((0, 3, 25), (0, 0, 20), (0, 0, 10)), "little": ((0, 6, 25), (0, 0, 20), (0, 0, 10))}, wrist=(70, 0)),
+        ],
+    ),
+}
+
+
+if __name__ == "__main__":
+    import imageio.v3 as iio
+    import torch
+
+    from handshadow.pipeline import exact_shadow, pose_hands
+    from handshadow.posefile import parse_pose
+
+    LIBRARY.mkdir(parents=True, exist_ok=True)
+    scene = Scene.default(192, 192)
+    tiles = []
+    for name, (about, hands) in POSES.items():
+        data = {"format": "handshadow.pose/1", "about": about, "scene": Scene.default(256, 256).to_json(), "forearm": True, "hands": hands}
+        (LIBRARY / f"{name}.json").write_text(json.dumps(data, indent=1) + "\n")
+        pose_set = parse_pose({**data, "scene": scene.to_json()})
+        with torch.no_grad():
+            mask = exact_shadow(scene, pose_hands(pose_set))
+        tile = (1 - mask) * 255
+        tile[:2], tile[:, :2] = 128, 128
+        tiles.append(tile)
+        print(f"{name:10s} {about}")
+    cols = 5
+    while len(tiles) % cols:
+        tiles.append(np.full_like(tiles[0], 255))
+    sheet = np.concatenate([np.concatenate(tiles[i : i + cols], 1) for i in range(0, len(tiles), cols)], 0)
+    iio.imwrite("out/library.png", sheet.astype(np.uint8))
+    print("wrote", LIBRARY, "and out/library.png")
