@@ -21,7 +21,7 @@ EXIT_INTERRUPTED = 130
 def cmd_render(args: argparse.Namespace) -> int:
     from handshadow.posefile import load_pose_file
 
-    pose_set = load_pose_file(examples.pose_path(args.pose))  # checked before the heavy imports
+    pose_set = load_pose_file(examples.pose_path(args.pose), frame=args.frame)  # checked before the heavy imports
     from handshadow.pipeline import render_pose_set
 
     out = render_pose_set(pose_set, args.out, force=args.force, mano_dir=args.mano_dir)
@@ -58,17 +58,31 @@ def resolve_device(name: str) -> str:
 
 def cmd_fit(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
+
+    out = Path(args.out) if args.out else Path("out") / Path(args.target).stem
+    ResultFolder(out, args.force)  # refuse a non-empty folder before any work
+    from handshadow.pipeline import fit_to_folder, resolve_target
+
+    resolve_target(args.target, 64, 64, args.invert)  # bad targets fail fast, before the models load
+    config = _fit_config(args)
+    folder, result, lines = fit_to_folder(args.target, out, config, force=args.force, invert=args.invert, show_progress=not args.quiet)
+    s = result.score
+    if not args.quiet:
+        state = "interrupted; best so far" if result.interrupted else ("success" if s.success else "done")
+        print(f"{state}: IoU {s.iou:.3f}, thin parts {s.thin_recall:.2f}, HD95 {s.hd95:.3f}, {result.steps} steps, {result.seconds:.0f} s")
+        for line in lines:
+            print(line)
+        print(f"results in {folder}/ (guide.png shows how to hold your hands)")
+    return EXIT_INTERRUPTED if result.interrupted else 0
+
+
+def _fit_config(args: argparse.Namespace):
     from handshadow.fit import FitConfig
 
     if args.size < 32 or args.size > 2048:
         raise HandshadowError(f"--size must be between 32 and 2048 pixels, got {args.size}")
     if args.iters is not None and args.iters < 1:
         raise HandshadowError(f"--iters must be positive, got {args.iters}")
-    out = Path(args.out) if args.out else Path("out") / Path(args.target).stem
-    ResultFolder(out, args.force)  # refuse a non-empty folder before any work
-    from handshadow.pipeline import fit_to_folder, resolve_target
-
-    resolve_target(args.target, 64, 64, args.invert)  # bad targets fail fast, before the models load
     config = FitConfig(
         hands=args.hands,
         size=args.size,
@@ -87,15 +101,40 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
         for side in ("right", "left"):
             load_rig("mano", side, None, config.mano_dir)
-    folder, result, lines = fit_to_folder(args.target, out, config, force=args.force, invert=args.invert, show_progress=not args.quiet)
-    s = result.score
+    return config
+
+
+def cmd_interpolate(args: argparse.Namespace) -> int:
+    from handshadow.export.files import ResultFolder
+
+    out = Path(args.out) if args.out else Path("out") / f"{Path(args.a).stem}-to-{Path(args.b).stem}"
+    ResultFolder(out, args.force)
+    from handshadow.pipeline import interpolate_to_folder, resolve_target
+
+    for source in (args.a, args.b):
+        resolve_target(source, 64, 64)
+    config = _fit_config(args)
+    folder, report = interpolate_to_folder(args.a, args.b, out, config, frames=args.frames, force=args.force, show_progress=not args.quiet)
     if not args.quiet:
-        state = "interrupted; best so far" if result.interrupted else ("success" if s.success else "done")
-        print(f"{state}: IoU {s.iou:.3f}, thin parts {s.thin_recall:.2f}, HD95 {s.hd95:.3f}, {result.steps} steps, {result.seconds:.0f} s")
-        for line in lines:
-            print(line)
-        print(f"results in {folder}/ (guide.png shows how to hold your hands)")
-    return EXIT_INTERRUPTED if result.interrupted else 0
+        print(f"results in {folder}/ (animation.mp4, animation.gif, poses.json, path.png, frames/)")
+    print(report.summary())
+    return 0
+
+
+def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto") -> None:
+    p.add_argument("--hands", default=hands_default, choices=["1", "2", "auto"] if hands_default == "auto" else ["1", "2"], help=f"number of hands (default: {hands_default})")
+    p.add_argument("--size", type=int, default=256, help="frame height and width in pixels (default 256)")
+    p.add_argument("--iters", type=int, help="total optimisation steps (default: set by --quality)")
+    p.add_argument("--quality", default="default", choices=["fast", "default", "best"])
+    p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
+    p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")
+    p.add_argument("--limits", default="anatomical", choices=["anatomical", "paper"], help="joint-limit preset")
+    p.add_argument("--light", default="point", choices=["point", "directional"])
+    p.add_argument("--no-forearm", action="store_true", help="hands without forearms")
+    p.add_argument("--force", action="store_true", help="write into a non-empty folder")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -110,26 +149,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--force", action="store_true", help="write into a non-empty folder")
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl / MANO_LEFT.pkl, for poses that use MANO")
+    p.add_argument("--frame", type=int, default=0, help="which frame of a poses.json (from interpolate) to render")
     p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("fit", help="find hand poses whose shadow matches a target image")
     p.add_argument("target", help="an image file (PNG, JPEG, GIF, BMP) or a built-in example name")
-    p.add_argument("--hands", default="auto", choices=["1", "2", "auto"], help="number of hands (default: auto)")
     p.add_argument("--out", help="output folder (default: out/<target name>)")
-    p.add_argument("--size", type=int, default=256, help="frame height and width in pixels (default 256)")
-    p.add_argument("--iters", type=int, help="total optimisation steps (default: set by --quality)")
-    p.add_argument("--quality", default="default", choices=["fast", "default", "best"])
-    p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
-    p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")
-    p.add_argument("--limits", default="anatomical", choices=["anatomical", "paper"], help="joint-limit preset")
-    p.add_argument("--light", default="point", choices=["point", "directional"])
-    p.add_argument("--no-forearm", action="store_true", help="hands without forearms")
+    _add_fit_options(p)
     p.add_argument("--invert", action="store_true", default=None, help="the shape is lighter than the ground (overrides the automatic choice)")
-    p.add_argument("--force", action="store_true", help="write into a non-empty folder")
-    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=cmd_fit)
+
+    p = sub.add_parser("interpolate", help="morph one hand shadow into another: a pose path to perform")
+    p.add_argument("a", help="the first target (image file or built-in example)")
+    p.add_argument("b", help="the last target")
+    p.add_argument("--frames", type=int, default=30, help="number of frames, ends included (default 30)")
+    p.add_argument("--out", help="output folder (default: out/<a>-to-<b>)")
+    _add_fit_options(p, hands_default="2")
+    p.set_defaults(func=cmd_interpolate)
 
     p = sub.add_parser("examples", help="list the built-in examples")
     p.set_defaults(func=cmd_examples)

@@ -20,7 +20,14 @@ from handshadow.metrics import FitScore, score
 from handshadow.posefile import HandPose, PoseSet
 from handshadow.scene import Scene
 from handshadow.search import HandPoses, Limits, Progress, Searcher, Stage
-from handshadow.starts import Candidates, apply_similarity, library_candidates, pivot_pixel, random_candidates, similarity_align
+from handshadow.starts import (
+    Candidates,
+    apply_similarity,
+    library_candidates,
+    pivot_pixel,
+    random_candidates,
+    similarity_align,
+)
 
 log = logging.getLogger(__name__)
 QUALITY = ("fast", "default", "best")
@@ -57,7 +64,8 @@ class FitResult:
     steps: int
     seconds: float
     interrupted: bool
-    frames: list = dataclasses.field(default_factory=list)  # progress snapshots (see FrameRecorder)
+    poses: list[HandPoses]  # the result as tensors (batch 1 per hand, pose_set's hand order)
+    searcher: Searcher  # the search's context (hands, limits, renderers) for follow-up work
 
 
 def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list[Stage]]:
@@ -66,7 +74,16 @@ def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
     n_random, n_keep, stages = {
         "fast": (24, 8, [Stage(64, 6, 12, 60, 3, 1.0, 1.0), Stage(128, 2, 6, 50, 1, 0.7, 0.3), Stage(size, 0, 3, 40, 1, 0.4, 0.05)]),
-        "default": (96, 24, [Stage(64, 8, 16, 140, 6, 1.0, 1.0), Stage(128, 3, 8, 100, 2, 0.7, 0.3), Stage(size, 0, 4, 120, 1, 0.4, 0.05)]),
+        "default": (
+            128,
+            32,
+            [
+                Stage(64, 8, 16, 160, 8, 1.0, 1.0),
+                Stage(128, 3, 8, 120, 3, 0.7, 0.3),
+                Stage(size, 1, 4, 160, 2, 0.4, 0.05),
+                Stage(size, 0, 2, 100, 1, 0.15, 0.0),
+            ],
+        ),
         "best": (192, 48, [Stage(64, 8, 16, 200, 8, 1.0, 1.0), Stage(128, 3, 8, 150, 3, 0.7, 0.3), Stage(size, 0, 4, 250, 1, 0.4, 0.05)]),
     }[quality]
     stages = [dataclasses.replace(s, height=min(s.height, size)) for s in stages]
@@ -80,19 +97,27 @@ def fit_frame(
     target: np.ndarray,
     config: FitConfig = FitConfig(),
     progress: Callable[[Progress], None] | None = None,
+    extra_starts: list[HandPoses] | None = None,
+    anchor: list[HandPoses] | None = None,
 ) -> FitResult:
-    """Fit one or two hands to a binary target frame (H, W)."""
+    """Fit one or two hands to a binary target frame (H, W).
+
+    extra_starts: hypotheses (per hand slot, right first) always tried, as given and aligned
+    to the target; anchor: batch-1 poses the solution should stay close to (a morph's other
+    end). Both fix the number of hands to theirs."""
     t0 = time.perf_counter()
     torch.manual_seed(config.seed)
     height, width = target.shape
     scene = Scene.default(width, height, light=config.light)
     options = ["1", "2"] if config.hands == "auto" else [config.hands]
+    if extra_starts is not None or anchor is not None:
+        options = [str(len(extra_starts if extra_starts is not None else anchor))]
     if any(o not in ("1", "2") for o in options):
         raise ValueError(f"--hands must be 1, 2 or auto, got {config.hands!r}")
     results = []
     deadline = config.time_limit_s / len(options) if config.time_limit_s else None
     for option in options:
-        results.append(_fit_hands(target, scene, int(option), config, progress, deadline))
+        results.append(_fit_hands(target, scene, int(option), config, progress, deadline, extra_starts, anchor))
         if results[-1][1].interrupted:
             break
     # Prefer one hand unless two are clearly better.
@@ -126,10 +151,10 @@ def fit_frame(
         "interrupted": any(r[1].interrupted for r in results),
     }
     pose_set = PoseSet(hands=tuple(hand_poses), scene=scene, forearm=config.forearm, fit=info)
-    return FitResult(pose_set, sc, shadow, np.asarray(target, bool), steps, seconds, info["interrupted"])
+    return FitResult(pose_set, sc, shadow, np.asarray(target, bool), steps, seconds, info["interrupted"], poses, searcher)
 
 
-def _fit_hands(target, scene, n_hands, config, progress, deadline):
+def _fit_hands(target, scene, n_hands, config, progress, deadline, extra_starts=None, anchor=None):
     sides = ["right", "left"][:n_hands] if n_hands == 2 else ["right"]
     dtype = torch.float32
     hands = [load_hand(config.hand_model, s, mano_dir=config.mano_dir, forearm=config.forearm, dtype=dtype, device=config.device) for s in sides]
@@ -140,19 +165,23 @@ def _fit_hands(target, scene, n_hands, config, progress, deadline):
         )
         for s in sides
     ]
-    searcher = Searcher(scene, target, hands, limits)
+    searcher = Searcher(scene, target, hands, limits, anchor=anchor)
     n_random, n_keep, stages = schedule(config.quality, config.iters, target.shape[0])
-    starts = initial_hypotheses(searcher, sides, limits, n_random, n_keep, np.random.default_rng(config.seed))
+    starts = initial_hypotheses(searcher, sides, limits, n_random, n_keep, np.random.default_rng(config.seed), extra_starts)
     res = searcher.run([h for h in starts.hands], stages, progress=progress, deadline_s=deadline)
     return n_hands, res, res.ranking[0], searcher, sides
 
 
-def initial_hypotheses(searcher: Searcher, sides, limits, n_random: int, n_keep: int, rng) -> Candidates:
+def initial_hypotheses(searcher: Searcher, sides, limits, n_random: int, n_keep: int, rng, extra: list[HandPoses] | None = None) -> Candidates:
     """Library and random candidates, aligned to the target, the best n_keep of them (at most
-    two from any one library pose, so the starts stay diverse)."""
+    two from any one library pose, so the starts stay diverse); ``extra`` starts are always
+    kept, both as given and aligned."""
     device = searcher.device
     lib = library_candidates(len(sides), sides)
-    cand = Candidates.cat([lib, random_candidates(n_random, sides, [Limits(l.joints.cpu(), l.wrist.cpu()) for l in limits], rng)])
+    parts = [lib, random_candidates(n_random, sides, [Limits(lim.joints.cpu(), lim.wrist.cpu()) for lim in limits], rng)]
+    if extra is not None:
+        parts.append(Candidates([HandPoses(*(t.detach().cpu() for t in h.args())) for h in extra], ["extra"] * extra[0].pose_rad.shape[0]))
+    cand = Candidates.cat(parts)
     cand = Candidates([HandPoses(*(t.to(device) for t in h.args())) for h in cand.hands], cand.origin)
     small = 64
     shadows = searcher.shadows(cand.hands, small)
@@ -170,7 +199,13 @@ def initial_hypotheses(searcher: Searcher, sides, limits, n_random: int, n_keep:
     iou = inter / (shadows.sum((1, 2)) + t.sum() - inter).clamp(min=1e-6)
     order = torch.argsort(iou, descending=True).tolist()
     picked, per_source = [], {}
+    if extra is not None:  # as given, and aligned
+        n_extra = extra[0].pose_rad.shape[0]
+        picked = list(range(len(cand.origin) - n_extra, len(cand.origin)))
+        given = Candidates([HandPoses(*(t.to(device) for t in h.args())) for h in extra], ["extra:given"] * n_extra)
     for i in order:
+        if i in picked:
+            continue
         src = moved.origin[i].split(":")[1] if moved.origin[i].startswith("library") else f"random{i}"
         if per_source.get(src, 0) >= 2:
             continue
@@ -179,4 +214,5 @@ def initial_hypotheses(searcher: Searcher, sides, limits, n_random: int, n_keep:
         if len(picked) == n_keep:
             break
     log.info("starts: %s", ", ".join(f"{moved.origin[i]} {float(iou[i]):.2f}" for i in picked[:8]))
-    return moved.select(picked)
+    chosen = moved.select(picked)
+    return Candidates.cat([given, chosen]) if extra is not None else chosen

@@ -210,3 +210,94 @@ def render_pose_set(pose_set: PoseSet, out: str | Path, force: bool = False, man
         write_scene_files(folder, pose_set.scene, meshes, mask)
         write_json(folder / "pose.json", pose_set.to_json())
         return folder.commit()
+
+
+def interpolate_to_folder(
+    source_a: str,
+    source_b: str,
+    out: str | Path,
+    config,
+    frames: int = 30,
+    force: bool = False,
+    show_progress: bool = True,
+    path_steps: int = 200,
+):
+    """Morph target A into target B: fit both ends (B close to A), blend and refine the path,
+    and write frames/, animation.gif, animation.mp4, poses.json, path.png, target_a.png,
+    target_b.png. Returns (folder, PathReport)."""
+    import sys
+
+    from handshadow.export.files import write_gif, write_mp4
+    from handshadow.export.images import mask_image
+    from handshadow.export.pictures import performer_view
+    from handshadow.export.plots import path_plot
+    from handshadow.fit import fit_frame
+    from handshadow.interpolate import morph_targets, refine_path, report, straight_path
+
+    ResultFolder(out, force)
+    if frames < 2 or frames > 600:
+        raise HandshadowError(f"--frames must be between 2 and 600, got {frames}")
+    target_a = resolve_target(source_a, config.size, config.size)
+    target_b = resolve_target(source_b, config.size, config.size)
+    say = (lambda msg: print(msg, file=sys.stderr, flush=True)) if show_progress else (lambda msg: None)
+    say("fitting A ...")
+    fit_a = fit_frame(target_a, config)
+    say(f"fitting A: IoU {fit_a.score.iou:.3f}; fitting B close to A ...")
+    fit_b = fit_frame(target_b, config, extra_starts=fit_a.poses, anchor=fit_a.poses)
+    say(f"fitting B: IoU {fit_b.score.iou:.3f}; refining the path ...")
+    searcher = fit_a.searcher
+    path = straight_path(fit_a.poses, fit_b.poses, frames)
+    path = refine_path(searcher, path, morph_targets(target_a, target_b, frames), steps=path_steps)
+    rep, shadows = report(searcher, path, target_a, target_b)
+    scene = fit_a.pose_set.scene
+    sides = [h.side for h in fit_a.pose_set.hands]
+    poses_json = path_pose_file(path, sides, fit_a.pose_set, rep)
+    views, pictures = [], []
+    for k in range(frames):
+        with torch.no_grad():
+            meshes = [(side, hand(*p.select(slice(k, k + 1)).args()).vertices[0].cpu().double().numpy(), hand.faces.cpu().numpy()) for side, hand, p in zip(sides, searcher.hands, path)]
+        view = performer_view(scene, meshes, size=(config.size, config.size), supersample=1)
+        shadow_rgb = np.repeat(mask_image(shadows[k])[..., None], 3, axis=2)
+        views.append(view)
+        pictures.append(np.concatenate([shadow_rgb, view], 1))
+    with ResultFolder(out, force) as folder:
+        (folder / "frames").mkdir()
+        for k in range(frames):
+            write_png(folder / "frames" / f"frame_{k:03d}_shadow.png", mask_image(shadows[k]))
+            write_png(folder / "frames" / f"frame_{k:03d}_hands.png", views[k])
+        write_png(folder / "target_a.png", mask_image(target_a))
+        write_png(folder / "target_b.png", mask_image(target_b))
+        write_gif(folder / "animation.gif", pictures, seconds_per_frame=1 / 12, hold_last_s=0.8)
+        write_mp4(folder / "animation.mp4", pictures, fps=12)
+        write_json(folder / "poses.json", poses_json)
+        write_png(folder / "path.png", path_plot(rep))
+        result = folder.commit()
+    return result, rep
+
+
+def path_pose_file(path, sides, template: PoseSet, rep) -> dict:
+    """poses.json: the scene once and every frame's hands, readable by ``render --frame K``."""
+    from handshadow.posefile import HandPose
+
+    frames = []
+    for k in range(path[0].pose_rad.shape[0]):
+        hands = []
+        for side, p, h0 in zip(sides, path, template.hands):
+            q = p.select(slice(k, k + 1))
+            hands.append(
+                HandPose(
+                    side, h0.model, h0.shape,
+                    np.degrees(q.pose_rad[0].cpu().double().numpy()),
+                    q.rotation[0].cpu().double().numpy(),
+                    q.translation[0].cpu().double().numpy(),
+                    np.degrees(q.wrist_rad[0].cpu().double().numpy()),
+                ).to_json()
+            )
+        frames.append({"hands": hands, "iou_a": round(rep.iou_a[k], 4), "iou_b": round(rep.iou_b[k], 4)})
+    return {
+        "format": "handshadow.poses/1",
+        "scene": template.scene.to_json(),
+        "forearm": template.forearm,
+        "frames": frames,
+        "summary": rep.summary(),
+    }

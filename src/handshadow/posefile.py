@@ -29,6 +29,7 @@ from handshadow.hands.rig import JOINT_NAMES, check_side
 from handshadow.scene import Scene, SceneError
 
 FORMAT = "handshadow.pose/1"
+PATH_FORMAT = "handshadow.poses/1"  # interpolate's poses.json: a scene and a list of frames
 
 
 class PoseFileError(HandshadowError):
@@ -97,8 +98,9 @@ class PoseSet:
         Path(path).write_text(json.dumps(self.to_json(), indent=1) + "\n")
 
 
-def load_pose_file(path: str | Path) -> PoseSet:
-    """Read and check a pose file; raises PoseFileError with a one-line reason."""
+def load_pose_file(path: str | Path, frame: int = 0) -> PoseSet:
+    """Read and check a pose file (pose.json, or one frame of a poses.json path); raises
+    PoseFileError with a one-line reason."""
     path = Path(path)
     if not path.is_file():
         raise PoseFileError(f"pose file not found: {path}")
@@ -106,6 +108,15 @@ def load_pose_file(path: str | Path) -> PoseSet:
         data = json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise PoseFileError(f"{path} is not a JSON pose file ({exc.__class__.__name__}: {exc})") from None
+    if isinstance(data, dict) and data.get("format") == PATH_FORMAT:
+        frames = data.get("frames")
+        if not isinstance(frames, list) or not frames:
+            raise PoseFileError(f"{path}: 'frames' must be a non-empty list")
+        if not -len(frames) <= frame < len(frames):
+            raise PoseFileError(f"{path} has {len(frames)} frames; --frame {frame} is out of range")
+        data = {"scene": data.get("scene"), "forearm": data.get("forearm", True), **frames[frame]}
+        if data["scene"] is None:
+            del data["scene"]
     return parse_pose(data, str(path))
 
 
@@ -128,6 +139,9 @@ def parse_pose(data, where: str = "pose") -> PoseSet:
     if not isinstance(forearm, bool):
         raise PoseFileError(f"{where}: 'forearm' must be true or false")
     fit = data.get("fit")
+    unknown = set(data) - {"format", "about", "scene", "forearm", "hands", "fit", "iou_a", "iou_b"}
+    if unknown:
+        raise PoseFileError(f"{where}: unknown field(s) {', '.join(sorted(unknown))}")
     return PoseSet(hands=hands, scene=scene, forearm=forearm, fit=fit if isinstance(fit, dict) else None)
 
 

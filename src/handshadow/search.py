@@ -60,6 +60,7 @@ class Weights:
     forearm: float = 0.05
     inside: float = 3.0  # joints and forearm axes project into the target
     thin_pull: float = 3.0  # fingers reach the target's thin parts
+    anchor: float = 0.002  # closeness to anchor poses, when the search has some
 
 
 @dataclasses.dataclass
@@ -169,7 +170,16 @@ class Searcher:
         limits: per hand its joint limits.
     """
 
-    def __init__(self, scene: Scene, target: np.ndarray, hands: list[HandModel], limits: list[Limits], weights: Weights | None = None):
+    def __init__(
+        self,
+        scene: Scene,
+        target: np.ndarray,
+        hands: list[HandModel],
+        limits: list[Limits],
+        weights: Weights | None = None,
+        anchor: list[HandPoses] | None = None,
+    ):
+        self.anchor = anchor  # optional batch-1 poses the solution should stay near
         self.scene = scene
         self.target = np.asarray(target, bool)
         self.hands = hands
@@ -227,11 +237,24 @@ class Searcher:
                 segs = torch.cat([segs, ends], 1)
                 offset += o.keypoints.shape[1] + o.forearm_points.shape[1]
             total = total + stage.skeleton * w.thin_pull * losses.thin_coverage(segs, maps)
+        if self.anchor is not None:
+            total = total + w.anchor * self._anchor_distance(globals_)
         centres = self.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
         total = total + w.penetration * losses.penetration(self.penetration.depths(centres))
         total = total + w.placement * losses.placement(height, *self.height_range)
         total = total + w.forearm * self._forearm_terms(outs, globals_)
         return total, mask
+
+    def _anchor_distance(self, globals_) -> torch.Tensor:
+        """Squared distance of each hand's placement from the anchor's: 5 cm of wrist travel or
+        0.5 rad of turn count one."""
+        from handshadow.hands.kinematics import rotmat_to_rotvec
+
+        out = 0
+        for (rot, trans), a in zip(globals_, self.anchor):
+            out = out + (((trans - a.translation) / 0.05) ** 2).sum(1)
+            out = out + (rotmat_to_rotvec(a.rotation.transpose(-1, -2) @ rot).norm(dim=1) / 0.5) ** 2
+        return out
 
     def _forearm_terms(self, outs, globals_) -> torch.Tensor:
         """Two wrists stay within reach of each other (at most 45 cm apart). Forearms may point

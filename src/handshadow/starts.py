@@ -91,7 +91,7 @@ def random_candidates(n: int, sides: list[str], limits: list[Limits], rng: np.ra
     """n random hypotheses: each finger extended, half bent or curled; hands facing the wall,
     the lamp or sideways, pointing any way in the wall plane; two hands side by side."""
     hands = []
-    for k, (side, lim) in enumerate(zip(sides, limits)):
+    for side, lim in zip(sides, limits):
         lo, hi = lim.joints[..., 0].numpy(), lim.joints[..., 1].numpy()
         pose = np.zeros((n, 15, 3))
         for f in range(len(FINGERS)):

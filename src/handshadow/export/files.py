@@ -80,6 +80,15 @@ def write_gif(path: Path, frames: list[np.ndarray], seconds_per_frame: float = 0
     iio.imwrite(path, np.stack(frames), extension=".gif", duration=durations, loop=0)
 
 
+def write_mp4(path: Path, frames: list[np.ndarray], fps: int = 12) -> None:
+    """An H.264 MP4 through imageio's ffmpeg plugin (imageio-ffmpeg from PyPI carries ffmpeg)."""
+    if not frames:
+        return
+    h, w = frames[0].shape[:2]
+    pad = ((0, h % 2), (0, w % 2), (0, 0))  # yuv420p wants even sizes
+    iio.imwrite(path, np.stack([np.pad(f, pad, mode="edge") for f in frames]), extension=".mp4", fps=fps, codec="libx264", macro_block_size=1)
+
+
 def shadow_image(mask: np.ndarray) -> np.ndarray:
     """(H, W) mask in [0, 1] -> uint8 black shadow on a white wall."""
     return ((1.0 - np.clip(mask, 0, 1)) * 255 + 0.5).astype(np.uint8)

@@ -32,6 +32,44 @@ def rotvec_to_rotmat(rotvec: torch.Tensor) -> torch.Tensor:
     return eye + a * k + b * (k @ k)
 
 
+def rotmat_to_rotvec(rotation: torch.Tensor) -> torch.Tensor:
+    """Inverse of :func:`rotvec_to_rotmat`: (..., 3, 3) -> (..., 3), angles in [0, pi].
+
+    Through the unit quaternion (Shepperd's method picks the numerically safest branch).
+    """
+    m = rotation
+    tr = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
+    cands = torch.stack(
+        [
+            torch.stack([1 + tr, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1),
+            torch.stack([m[..., 2, 1] - m[..., 1, 2], 1 + 2 * m[..., 0, 0] - tr, m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]], -1),
+            torch.stack([m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0], 1 + 2 * m[..., 1, 1] - tr, m[..., 1, 2] + m[..., 2, 1]], -1),
+            torch.stack([m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1], 1 + 2 * m[..., 2, 2] - tr], -1),
+        ],
+        -2,
+    )  # (..., 4, 4): each row a quaternion (w, x, y, z) up to scale
+    diag = torch.stack([tr, m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]], -1)
+    best = diag.argmax(-1)
+    q = torch.gather(cands, -2, best[..., None, None].expand(*best.shape, 1, 4))[..., 0, :]
+    q = q / q.norm(dim=-1, keepdim=True)
+    q = q * torch.where(q[..., :1] < 0, -1.0, 1.0).to(q.dtype)  # w >= 0: the short way round
+    sin_half = q[..., 1:].norm(dim=-1, keepdim=True)
+    angle = 2 * torch.atan2(sin_half, q[..., :1])
+    scale = torch.where(sin_half > 1e-8, angle / sin_half.clamp(min=1e-12), torch.full_like(angle, 2.0))
+    return q[..., 1:] * scale
+
+
+def slerp_rotations(r0: torch.Tensor, r1: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+    """Geodesic interpolation on SO(3): r0 (3, 3), r1 (3, 3), t (N,) in [0, 1] -> (N, 3, 3)."""
+    delta = rotmat_to_rotvec(r0.transpose(-1, -2) @ r1)
+    return r0 @ rotvec_to_rotmat(t[:, None] * delta)
+
+
+def rotation_angle_deg(r0: torch.Tensor, r1: torch.Tensor) -> torch.Tensor:
+    """Geodesic angle between rotations (..., 3, 3), degrees."""
+    return torch.rad2deg(rotmat_to_rotvec(r0.transpose(-1, -2) @ r1).norm(dim=-1))
+
+
 def axis_angle_rotations(axes: torch.Tensor, angles_rad: torch.Tensor) -> torch.Tensor:
     """Rotations about the given unit axes.
 

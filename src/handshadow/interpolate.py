@@ -1,0 +1,193 @@
+"""Pose paths between two fitted solutions: a performance that morphs shadow A into shadow B.
+
+The straight path blends joint and wrist angles linearly, turns each hand's global rotation
+along the geodesic on SO(3) and moves the wrists in straight lines. It is then refined as a
+whole: every in-between frame keeps its joints within limits (by construction, as in the fit),
+avoids penetration, stays between light and wall, follows a signed-distance morph of A into B
+as a soft target, and changes as evenly as possible from frame to frame (first and second
+differences); a hinge keeps every step under the step limit. The end frames stay the fits.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+from handshadow import losses
+from handshadow.hands.kinematics import rotation_angle_deg, rotmat_to_rotvec, slerp_rotations
+from handshadow.metrics import score
+from handshadow.render import gaussian_blur
+from handshadow.search import HandPoses, Hypotheses, Searcher, Stage
+
+STEP_LIMIT_DEG = 8.0  # the hinge starts here, under the 10-degree bar
+PENETRATION_MM = 2.0  # a frame whose proxies overlap deeper than this counts as penetrating
+
+
+def straight_path(a: list[HandPoses], b: list[HandPoses], frames: int) -> list[HandPoses]:
+    """Blend per hand from a (batch 1) to b (batch 1) over ``frames`` frames (batch = frames)."""
+    t = torch.linspace(0, 1, frames, dtype=a[0].pose_rad.dtype, device=a[0].pose_rad.device)
+    out = []
+    for ha, hb in zip(a, b):
+        lerp = lambda x, y: x + (y - x) * t.view(-1, *([1] * (x.dim() - 1)))  # noqa: E731
+        out.append(
+            HandPoses(
+                lerp(ha.pose_rad, hb.pose_rad),
+                slerp_rotations(ha.rotation[0], hb.rotation[0], t),
+                lerp(ha.translation, hb.translation),
+                lerp(ha.wrist_rad, hb.wrist_rad),
+            )
+        )
+    return out
+
+
+def morph_targets(a: np.ndarray, b: np.ndarray, frames: int) -> np.ndarray:
+    """(frames, H, W) bool: a signed-distance blend of the two targets."""
+
+    def sdf(m):
+        return ndimage.distance_transform_edt(~m) - ndimage.distance_transform_edt(m)
+
+    da, db = sdf(np.asarray(a, bool)), sdf(np.asarray(b, bool))
+    t = np.linspace(0, 1, frames)[:, None, None]
+    return (1 - t) * da + t * db < 0
+
+
+@dataclasses.dataclass(frozen=True)
+class PathWeights:
+    smooth: float = 30.0
+    accel: float = 60.0
+    step_hinge: float = 200.0
+    penetration: float = 2.0
+    placement: float = 0.05
+    morph: float = 0.3
+
+
+def step_sizes_deg(path: list[HandPoses]) -> torch.Tensor:
+    """(frames - 1,) the largest change between consecutive frames of any joint angle, wrist
+    angle or global rotation (geodesic), degrees."""
+    steps = []
+    for h in path:
+        steps.append(torch.rad2deg((h.pose_rad[1:] - h.pose_rad[:-1]).abs().flatten(1).amax(1)))
+        steps.append(torch.rad2deg((h.wrist_rad[1:] - h.wrist_rad[:-1]).abs().amax(1)))
+        steps.append(rotation_angle_deg(h.rotation[:-1], h.rotation[1:]))
+    return torch.stack(steps, 1).amax(1)
+
+
+def refine_path(searcher: Searcher, path: list[HandPoses], morph: np.ndarray, steps: int = 200, weights: PathWeights = PathWeights(), height: int = 96) -> list[HandPoses]:
+    """Optimise the in-between frames of a path (the first and last stay fixed)."""
+    frames = path[0].pose_rad.shape[0]
+    if frames <= 2:
+        return path
+    hyp = Hypotheses(path, searcher.limits).to(searcher.device)
+    free = torch.ones(frames, device=searcher.device)
+    free[0] = free[-1] = 0
+    opt = torch.optim.Adam(hyp.param_groups(0.3))
+    from skimage.transform import resize
+
+    morph_small = torch.as_tensor(
+        np.stack([resize(m.astype(float), (height, round(m.shape[1] * height / m.shape[0])), order=1, anti_aliasing=True) for m in morph]),
+        dtype=searcher.dtype,
+        device=searcher.device,
+    )
+    stage = Stage(height, 2.0, 0.0, 1, 1, skeleton=0.0)
+    scene, renderer, _ = searcher.level(height)
+    from handshadow.render.shadow import shadow_mask
+
+    lo, hi = searcher.height_range
+    for _ in range(steps):
+        opt.zero_grad(set_to_none=True)
+        outs, globals_, cur = [], [], []
+        for i, hand in enumerate(searcher.hands):
+            pose, rot, trans, wrist = hyp.hand(i)
+            outs.append(hand(pose, rot, trans, wrist))
+            globals_.append((rot, trans))
+            cur.append((pose, rot, trans, wrist))
+        xy, h = renderer.project([o.vertices for o in outs])
+        mask = shadow_mask(xy, renderer.topology, scene.image.height, scene.image.width)
+        blur = stage.blur_px * height / searcher.target.shape[0]
+        sil = ((gaussian_blur(mask, blur) - gaussian_blur(morph_small, blur)) ** 2).mean((1, 2))
+        centres = searcher.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
+        pen = losses.penetration(searcher.penetration.depths(centres))
+        place = losses.placement(h, lo, hi)
+        smooth = accel = hinge = 0
+        for pose, rot, trans, wrist in cur:
+            d_pose = pose[1:] - pose[:-1]
+            d_wrist = wrist[1:] - wrist[:-1]
+            d_rot = rotmat_to_rotvec(rot[:-1].transpose(-1, -2) @ rot[1:])
+            d_trans = (trans[1:] - trans[:-1]) / 0.02  # 2 cm weigh like a radian
+            smooth = smooth + sum((d**2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_rot, d_trans))
+            accel = accel + sum(((d[1:] - d[:-1]) ** 2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_trans))
+            biggest = torch.cat([d_pose.abs().flatten(1), d_wrist.abs(), d_rot.norm(dim=1, keepdim=True)], 1)
+            hinge = hinge + (torch.relu(biggest - np.radians(STEP_LIMIT_DEG)) ** 2).sum()
+        loss = (
+            weights.smooth * smooth
+            + weights.accel * accel
+            + weights.step_hinge * hinge
+            + ((weights.penetration * pen + weights.placement * place + weights.morph * sil) * free).sum()
+        )
+        loss.backward()
+        for p in hyp.parameters():
+            if p.grad is not None:
+                p.grad *= free.view(-1, *([1] * (p.dim() - 1)))
+        opt.step()
+    return hyp.poses()
+
+
+@dataclasses.dataclass
+class PathReport:
+    iou_start: float
+    iou_end: float
+    thin_start: float
+    thin_end: float
+    hd95_start: float
+    hd95_end: float
+    max_step_deg: float
+    penetrating_frames: int
+    iou_a: list[float]
+    iou_b: list[float]
+    steps_deg: list[float]
+    penetration_mm: list[float]
+
+    def summary(self) -> str:
+        return (
+            f"SUMMARY iou_start={self.iou_start:.3f} iou_end={self.iou_end:.3f} thin_start={self.thin_start:.3f} "
+            f"thin_end={self.thin_end:.3f} hd95_start={self.hd95_start:.4f} hd95_end={self.hd95_end:.4f} "
+            f"max_step_deg={self.max_step_deg:.2f} penetrating_frames={self.penetrating_frames}"
+        )
+
+
+@torch.no_grad()
+def penetration_depth_mm(searcher: Searcher, path: list[HandPoses]) -> np.ndarray:
+    """(frames,) deepest proxy overlap per frame, millimetres."""
+    outs = [hand(*p.args()) for hand, p in zip(searcher.hands, path)]
+    globals_ = [(p.rotation, p.translation) for p in path]
+    centres = searcher.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
+    return (searcher.penetration.depths(centres).amax(1) * 1000).cpu().numpy()
+
+
+@torch.no_grad()
+def report(searcher: Searcher, path: list[HandPoses], target_a: np.ndarray, target_b: np.ndarray) -> tuple[PathReport, np.ndarray]:
+    """Measures of a path, and its exact shadows (frames, H, W) bool at full resolution."""
+    shadows = searcher.shadows(path).cpu().numpy() > 0.5
+    a, b = np.asarray(target_a, bool), np.asarray(target_b, bool)
+    start, end = score(shadows[0], a), score(shadows[-1], b)
+    iou = lambda m, t: float((m & t).sum() / max((m | t).sum(), 1))  # noqa: E731
+    depth = penetration_depth_mm(searcher, path)
+    steps = step_sizes_deg(path).cpu().numpy()
+    rep = PathReport(
+        start.iou,
+        end.iou,
+        start.thin_recall,
+        end.thin_recall,
+        start.hd95,
+        end.hd95,
+        float(steps.max()) if len(steps) else 0.0,
+        int((depth > PENETRATION_MM).sum()),
+        [iou(m, a) for m in shadows],
+        [iou(m, b) for m in shadows],
+        steps.tolist(),
+        depth.tolist(),
+    )
+    return rep, shadows

@@ -1,0 +1,141 @@
+"""`handshadow fit`: a known answer comes back; the result folder is complete; bad input and
+Ctrl-C behave."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+
+from handshadow.cli import main
+from handshadow.fit import FitConfig, fit_frame
+from handshadow.library import load_library_pose
+from handshadow.pipeline import exact_shadow, pose_hands
+from handshadow.scene import Scene
+
+PY = [sys.executable, "-m", "handshadow.cli"]
+OUTPUTS = {"target.png", "shadow.png", "overlay.png", "scene.json", "pose.json", "right.obj", "hands.glb", "progress.gif", "guide.png"}
+
+
+def known_target(name: str, size: int):
+    """The exact shadow of a library pose at a size, and that pose."""
+    pose_set = load_library_pose(name)
+    scene = Scene.default(size, size)
+    pose_set = type(pose_set)(pose_set.hands, scene, pose_set.forearm)
+    with torch.no_grad():
+        return exact_shadow(scene, pose_hands(pose_set)) > 0.5, pose_set
+
+
+def test_fit_recovers_a_shadow_rendered_from_a_known_pose():
+    target, truth = known_target("dog", 128)
+    result = fit_frame(target, FitConfig(hands="1", size=128, quality="fast", seed=1))
+    assert result.score.iou >= 0.95, result.score
+    # The answer comes back: the hand casts its shadow where the true hand casts it.
+    scene = result.pose_set.scene
+    true_wrist = scene.project(torch.as_tensor(truth.hands[0].translation)[None])[0][0]
+    got_wrist = scene.project(torch.as_tensor(result.pose_set.hands[0].translation)[None])[0][0]
+    assert float((true_wrist - got_wrist).norm()) < 0.12 * 128
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fit") / "dog"
+    assert main(["fit", "dog", "--hands", "1", "--size", "96", "--quality", "fast", "--out", str(out), "--quiet", "--device", "cpu"]) == 0
+    return out
+
+
+def test_result_folder_is_complete_and_renders_back(fitted, tmp_path):
+    assert OUTPUTS <= {p.name for p in fitted.iterdir()}
+    pose = json.loads((fitted / "pose.json").read_text())
+    assert {"iou", "iterations", "seconds", "seed", "success"} <= set(pose["fit"])
+    shadow = iio.imread(fitted / "shadow.png")
+    overlay = iio.imread(fitted / "overlay.png")
+    assert shadow.shape == (96, 96) and overlay.shape == (96, 96, 3)
+    gif = iio.imread(fitted / "progress.gif", index=None)
+    assert gif.ndim == 4 and gif.shape[0] >= 5  # frames of the optimisation
+    assert main(["render", str(fitted / "pose.json"), "--out", str(tmp_path / "again")]) == 0
+    assert np.array_equal(iio.imread(tmp_path / "again" / "shadow.png"), shadow)
+
+
+def _run(args, **kw):
+    return subprocess.run(PY + args, capture_output=True, text=True, **kw)
+
+
+def _bad_images(tmp_path):
+    cases = {}
+    (tmp_path / "notes.png").write_text("not an image")
+    cases["non-image"] = tmp_path / "notes.png"
+    iio.imwrite(tmp_path / "empty.png", np.full((40, 40), 255, np.uint8))
+    cases["empty"] = tmp_path / "empty.png"
+    full = np.zeros((40, 40), np.uint8)
+    full[0, :] = full[-1, :] = full[:, 0] = full[:, -1] = 255
+    iio.imwrite(tmp_path / "full.png", full)
+    cases["fills the frame"] = tmp_path / "full.png"
+    iio.imwrite(tmp_path / "dot.png", np.zeros((1, 1), np.uint8))
+    cases["1 pixel"] = tmp_path / "dot.png"
+    cases["missing"] = tmp_path / "nope.png"
+    return cases
+
+
+def test_bad_targets_fail_cleanly(tmp_path):
+    for name, path in _bad_images(tmp_path).items():
+        out = tmp_path / f"out-{name.replace(' ', '_')}"
+        res = _run(["fit", str(path), "--out", str(out)])
+        assert res.returncode == 2, (name, res.stderr)
+        assert res.stderr.startswith("handshadow: error: ") and res.stderr.count("\n") == 1, (name, res.stderr)
+        assert not out.exists(), name
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--device", "tpu"], "unknown device"),
+        (["--hand-model", "mano"], "--mano-dir"),
+        (["--size", "4"], "--size"),
+    ],
+)
+def test_bad_options_fail_cleanly(tmp_path, args, message):
+    res = _run(["fit", "dog", "--out", str(tmp_path / "o")] + args)
+    assert res.returncode == 2 and message in res.stderr and res.stderr.count("\n") == 1, res.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_missing_mano_files_and_unavailable_cuda(tmp_path):
+    res = _run(["fit", "dog", "--out", str(tmp_path / "o"), "--hand-model", "mano", "--mano-dir", str(tmp_path)])
+    assert res.returncode == 2 and "MANO_RIGHT.pkl" in res.stderr and res.stderr.count("\n") == 1
+    if not torch.cuda.is_available():
+        res = _run(["fit", "dog", "--out", str(tmp_path / "o"), "--device", "cuda"])
+        assert res.returncode == 2 and "CUDA" in res.stderr and res.stderr.count("\n") == 1
+
+
+def test_non_empty_output_folder_is_kept(tmp_path):
+    (tmp_path / "keep").mkdir()
+    (tmp_path / "keep" / "mine.txt").write_text("precious")
+    res = _run(["fit", "dog", "--out", str(tmp_path / "keep")])
+    assert res.returncode == 2 and "--force" in res.stderr
+    assert (tmp_path / "keep" / "mine.txt").read_text() == "precious"
+
+
+def test_ctrl_c_writes_the_best_result_so_far(tmp_path):
+    out = tmp_path / "interrupted"
+    proc = subprocess.Popen(
+        PY + ["fit", "bird", "--hands", "2", "--size", "96", "--out", str(out), "--quiet", "--device", "cpu", "--iters", "100000"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    time.sleep(25)  # into the search (model loading and starts take a few seconds)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=240)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    assert OUTPUTS | {"left.obj"} <= {p.name for p in out.iterdir()}
+    pose = json.loads((out / "pose.json").read_text())
+    assert pose["fit"]["interrupted"] is True and len(pose["hands"]) == 2
