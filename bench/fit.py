@@ -45,10 +45,16 @@ def main() -> None:
         wanted = set(args.names.split(","))
         files = [f for f in files if f.stem in wanted]
     if args.limit and args.limit < len(files):
-        files = [files[round(i * (len(files) - 1) / (args.limit - 1))] for i in range(args.limit)] if args.limit > 1 else files[:1]
+        files = (
+            [files[round(i * (len(files) - 1) / (args.limit - 1))] for i in range(args.limit)]
+            if args.limit > 1
+            else files[:1]
+        )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    print(f"{len(files)} targets, hands={args.hands}, size={args.size}, quality={args.quality}, device={args.device}, torch threads={torch.get_num_threads()}")
+    print(
+        f"{len(files)} targets, hands={args.hands}, size={args.size}, quality={args.quality}, device={args.device}, torch threads={torch.get_num_threads()}"
+    )
     print(f"{'target':24s} {'IoU':>6s} {'F1@2':>6s} {'HD95':>6s} {'thin':>6s} {'ok':>3s} {'s':>6s}")
     rows, tiles = [], []
     for path in files:
@@ -58,12 +64,26 @@ def main() -> None:
             print(f"{path.stem:24s} skipped: {exc}")
             continue
         t0 = time.perf_counter()
-        result = fit_frame(target, FitConfig(hands=args.hands, size=args.size, quality=args.quality, device=args.device))
+        result = fit_frame(
+            target, FitConfig(hands=args.hands, size=args.size, quality=args.quality, device=args.device)
+        )
         seconds = time.perf_counter() - t0
         s = result.score
-        row = {"target": str(path), "iou": s.iou, "f1": s.boundary_f1, "hd95": s.hd95, "thin": s.thin_recall, "success": s.success, "seconds": seconds, "hands": len(result.pose_set.hands)}
+        row = {
+            "target": str(path),
+            "iou": s.iou,
+            "f1": s.boundary_f1,
+            "hd95": s.hd95,
+            "thin": s.thin_recall,
+            "success": s.success,
+            "seconds": seconds,
+            "hands": len(result.pose_set.hands),
+        }
         rows.append(row)
-        print(f"{path.stem:24s} {s.iou:6.3f} {s.boundary_f1:6.3f} {s.hd95:6.3f} {s.thin_recall:6.2f} {'yes' if s.success else 'no':>3s} {seconds:6.1f}", flush=True)
+        print(
+            f"{path.stem:24s} {s.iou:6.3f} {s.boundary_f1:6.3f} {s.hd95:6.3f} {s.thin_recall:6.2f} {'yes' if s.success else 'no':>3s} {seconds:6.1f}",
+            flush=True,
+        )
         tiles.append(_sheet_row(target, result.shadow, path.stem, s.success))
         (out / "rows.json").write_text(json.dumps(rows, indent=1))
     if tiles:
@@ -81,12 +101,16 @@ def _sheet_row(target: np.ndarray, shadow: np.ndarray, name: str, success: bool,
     from skimage.transform import resize
 
     def small(img):
-        return (resize(img.astype(float), (tile, tile * img.shape[1] // img.shape[0]), order=1, anti_aliasing=True) * 255).astype(np.uint8)
+        return (
+            resize(img.astype(float), (tile, tile * img.shape[1] // img.shape[0]), order=1, anti_aliasing=True) * 255
+        ).astype(np.uint8)
 
     t = 255 - small(target)
     s = 255 - small(shadow)
     grey = [np.stack([x] * 3, -1) for x in (t, s)]
-    ov = (resize(overlay_image(target, shadow).astype(float) / 255, (tile, grey[0].shape[1]), order=1) * 255).astype(np.uint8)
+    ov = (resize(overlay_image(target, shadow).astype(float) / 255, (tile, grey[0].shape[1]), order=1) * 255).astype(
+        np.uint8
+    )
     row = np.concatenate(grey + [ov], 1)
     row[:3, :, :] = (60, 170, 60) if success else (200, 60, 60)  # a green or red bar per row
     return row

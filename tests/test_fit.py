@@ -20,7 +20,17 @@ from handshadow.pipeline import exact_shadow, pose_hands
 from handshadow.scene import Scene
 
 PY = [sys.executable, "-m", "handshadow.cli"]
-OUTPUTS = {"target.png", "shadow.png", "overlay.png", "scene.json", "pose.json", "right.obj", "hands.glb", "progress.gif", "guide.png"}
+OUTPUTS = {
+    "target.png",
+    "shadow.png",
+    "overlay.png",
+    "scene.json",
+    "pose.json",
+    "right.obj",
+    "hands.glb",
+    "progress.gif",
+    "guide.png",
+}
 
 
 def known_target(name: str, size: int):
@@ -46,7 +56,26 @@ def test_fit_recovers_a_shadow_rendered_from_a_known_pose():
 @pytest.fixture(scope="module")
 def fitted(tmp_path_factory):
     out = tmp_path_factory.mktemp("fit") / "dog"
-    assert main(["fit", "dog", "--hands", "1", "--size", "96", "--quality", "fast", "--out", str(out), "--quiet", "--device", "cpu"]) == 0
+    assert (
+        main(
+            [
+                "fit",
+                "dog",
+                "--hands",
+                "1",
+                "--size",
+                "96",
+                "--quality",
+                "fast",
+                "--out",
+                str(out),
+                "--quiet",
+                "--device",
+                "cpu",
+            ]
+        )
+        == 0
+    )
     return out
 
 
@@ -125,7 +154,22 @@ def test_non_empty_output_folder_is_kept(tmp_path):
 def test_ctrl_c_writes_the_best_result_so_far(tmp_path):
     out = tmp_path / "interrupted"
     proc = subprocess.Popen(
-        PY + ["fit", "bird", "--hands", "2", "--size", "96", "--out", str(out), "--quiet", "--device", "cpu", "--iters", "100000"],
+        PY
+        + [
+            "fit",
+            "bird",
+            "--hands",
+            "2",
+            "--size",
+            "96",
+            "--out",
+            str(out),
+            "--quiet",
+            "--device",
+            "cpu",
+            "--iters",
+            "100000",
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -28,7 +28,17 @@ def _reference(shape, size=64):
 
 @pytest.mark.parametrize(
     "kind",
-    ["dark-on-light.png", "light-on-dark.png", "alpha.png", "grey.png", "gif.gif", "bmp.bmp", "jpeg.jpg", "sixteen.png", "antialiased.png"],
+    [
+        "dark-on-light.png",
+        "light-on-dark.png",
+        "alpha.png",
+        "grey.png",
+        "gif.gif",
+        "bmp.bmp",
+        "jpeg.jpg",
+        "sixteen.png",
+        "antialiased.png",
+    ],
 )
 def test_every_kind_of_image_gives_the_same_frame(tmp_path, shape, kind):
     path = tmp_path / kind

@@ -22,5 +22,7 @@ if __name__ == "__main__":
         with torch.no_grad():
             mask = exact_shadow(pose_set.scene, pose_hands(pose_set))
         iio.imwrite(TARGETS / f"{name}.png", shadow_image(mask))
-        (TARGETS / f"{name}.txt").write_text(library_about(name).split(":")[0] + " (the shadow of the library pose '" + name + "')\n")
+        (TARGETS / f"{name}.txt").write_text(
+            library_about(name).split(":")[0] + " (the shadow of the library pose '" + name + "')\n"
+        )
         print("wrote", TARGETS / f"{name}.png")

@@ -41,7 +41,9 @@ def hand(side, rotation, translation, fingers=None, wrist=(0, 0)):
     for name, joints in (fingers or {}).items():
         f = FINGERS.index(name)
         pose[3 * f : 3 * f + 3] = np.asarray(joints, float)
-    rot = rotation if isinstance(rotation, np.ndarray) else Rotation.from_euler("xyz", rotation, degrees=True).as_matrix()
+    rot = (
+        rotation if isinstance(rotation, np.ndarray) else Rotation.from_euler("xyz", rotation, degrees=True).as_matrix()
+    )
     return {
         "side": side,
         "model": "anny",
@@ -106,14 +108,24 @@ POSES = {
                 "right",
                 frame(direction(145), (0, 0, -1)),
                 (0.03, -0.05, 1.0),
-                {"thumb": ((0, 35, 0), (0, 0, 10), (0, 0, 10)), "index": ((0, 10, 0),) + STRAIGHT[1:], "ring": ((0, -8, 0),) + STRAIGHT[1:], "little": ((0, -16, 0),) + STRAIGHT[1:]},
+                {
+                    "thumb": ((0, 35, 0), (0, 0, 10), (0, 0, 10)),
+                    "index": ((0, 10, 0),) + STRAIGHT[1:],
+                    "ring": ((0, -8, 0),) + STRAIGHT[1:],
+                    "little": ((0, -16, 0),) + STRAIGHT[1:],
+                },
                 wrist=(0, 10),
             ),
             hand(
                 "left",
                 frame(direction(35), (0, 0, -1)),
                 (-0.03, -0.05, 1.0),
-                {"thumb": ((0, 35, 0), (0, 0, 10), (0, 0, 10)), "index": ((0, 10, 0),) + STRAIGHT[1:], "ring": ((0, -8, 0),) + STRAIGHT[1:], "little": ((0, -16, 0),) + STRAIGHT[1:]},
+                {
+                    "thumb": ((0, 35, 0), (0, 0, 10), (0, 0, 10)),
+                    "index": ((0, 10, 0),) + STRAIGHT[1:],
+                    "ring": ((0, -8, 0),) + STRAIGHT[1:],
+                    "little": ((0, -16, 0),) + STRAIGHT[1:],
+                },
                 wrist=(0, 10),
             ),
         ],
@@ -125,7 +137,11 @@ POSES = {
                 "right",
                 frame(direction(-15), (0, 1, 0.3)),
                 (-0.02, 0.08, 1.0),
-                {"thumb": ((0, -5, 20), (0, 0, 10), (0, 0, 0)), "index": ((0, -3, 10),) + STRAIGHT[1:], "little": ((0, 3, 10),) + STRAIGHT[1:]},
+                {
+                    "thumb": ((0, -5, 20), (0, 0, 10), (0, 0, 0)),
+                    "index": ((0, -3, 10),) + STRAIGHT[1:],
+                    "little": ((0, 3, 10),) + STRAIGHT[1:],
+                },
                 wrist=(75, 0),
             )
         ],
@@ -137,14 +153,25 @@ POSES = {
                 "right",
                 frame(direction(-10), (0, 0, 1)),
                 (0.0, -0.05, 1.0),
-                {"thumb": ((0, 10, 10), (0, 0, 0), (0, 0, 0)), "index": ((0, -4, 5),) + STRAIGHT[1:], "ring": ((0, 2, 5),) + STRAIGHT[1:], "little": ((0, 4, 5),) + STRAIGHT[1:]},
+                {
+                    "thumb": ((0, 10, 10), (0, 0, 0), (0, 0, 0)),
+                    "index": ((0, -4, 5),) + STRAIGHT[1:],
+                    "ring": ((0, 2, 5),) + STRAIGHT[1:],
+                    "little": ((0, 4, 5),) + STRAIGHT[1:],
+                },
                 wrist=(0, 0),
             ),
             hand(
                 "left",
                 frame(direction(95), (0, 0, 1)),
                 (-0.05, 0.02, 0.95),
-                {"thumb": ((0, 30, 0),) + STRAIGHT[1:], "index": ((0, 20, 0),) + STRAIGHT[1:], "middle": ((0, 5, 0),) + STRAIGHT[1:], "ring": ((0, -12, 0),) + STRAIGHT[1:], "little": ((0, -20, 0),) + STRAIGHT[1:]},
+                {
+                    "thumb": ((0, 30, 0),) + STRAIGHT[1:],
+                    "index": ((0, 20, 0),) + STRAIGHT[1:],
+                    "middle": ((0, 5, 0),) + STRAIGHT[1:],
+                    "ring": ((0, -12, 0),) + STRAIGHT[1:],
+                    "little": ((0, -20, 0),) + STRAIGHT[1:],
+                },
                 wrist=(0, 0),
             ),
         ],
@@ -156,13 +183,23 @@ POSES = {
                 "right",
                 frame(direction(5), (0, 0, 1)),
                 (-0.04, 0.01, 1.0),
-                {"thumb": ((0, 35, 0), (0, 0, 0), (0, 0, 0)), "index": ((0, -4, 0),) + STRAIGHT[1:], "ring": ((0, 4, 0),) + STRAIGHT[1:], "little": ((0, 8, 0),) + STRAIGHT[1:]},
+                {
+                    "thumb": ((0, 35, 0), (0, 0, 0), (0, 0, 0)),
+                    "index": ((0, -4, 0),) + STRAIGHT[1:],
+                    "ring": ((0, 4, 0),) + STRAIGHT[1:],
+                    "little": ((0, 8, 0),) + STRAIGHT[1:],
+                },
             ),
             hand(
                 "left",
                 frame(direction(-8), (0, 0, -1)),
                 (-0.04, -0.035, 0.97),
-                {"thumb": ((0, 0, 40), (0, 0, 40), (0, 0, 30)), "index": ((0, -3, 10),) + STRAIGHT[1:], "ring": ((0, 3, 10),) + STRAIGHT[1:], "little": ((0, 6, 10),) + STRAIGHT[1:]},
+                {
+                    "thumb": ((0, 0, 40), (0, 0, 40), (0, 0, 30)),
+                    "index": ((0, -3, 10),) + STRAIGHT[1:],
+                    "ring": ((0, 3, 10),) + STRAIGHT[1:],
+                    "little": ((0, 6, 10),) + STRAIGHT[1:],
+                },
             ),
         ],
     ),
@@ -173,7 +210,13 @@ POSES = {
                 "right",
                 frame(direction(5), (0, 0, 1)),
                 (-0.05, 0.0, 1.0),
-                {"thumb": ((0, -10, 30), (0, 0, 10), (0, 0, 0)), "index": ((0, -4, 15), (0, 0, 20), (0, 0, 10)), "middle": ((0, 0, 15), (0, 0, 20), (0, 0, 10)), "ring": ((0, 4, 15), (0, 0, 20), (0, 0, 10)), "little": ((0, 8, 15), (0, 0, 20), (0, 0, 10))},
+                {
+                    "thumb": ((0, -10, 30), (0, 0, 10), (0, 0, 0)),
+                    "index": ((0, -4, 15), (0, 0, 20), (0, 0, 10)),
+                    "middle": ((0, 0, 15), (0, 0, 20), (0, 0, 10)),
+                    "ring": ((0, 4, 15), (0, 0, 20), (0, 0, 10)),
+                    "little": ((0, 8, 15), (0, 0, 20), (0, 0, 10)),
+                },
                 wrist=(-20, 0),
             )
         ],
@@ -181,49 +224,192 @@ POSES = {
     "crocodile": (
         "Crocodile: hands stacked, fingers forward as the jaws, slightly open.",
         [
-            hand("right", frame(direction(8), (0, 1, 0.4)), (-0.06, 0.0, 1.0), {"index": ((0, -3, 0),) + STRAIGHT[1:], "ring": ((0, 3, 0),) + STRAIGHT[1:], "little": ((0, 6, 0),) + STRAIGHT[1:], "thumb": ((0, -10, 20),) + STRAIGHT[1:]}),
-            hand("left", frame(direction(-8), (0, -1, 0.4)), (-0.06, -0.05, 0.98), {"index": ((0, -3, 0),) + STRAIGHT[1:], "ring": ((0, 3, 0),) + STRAIGHT[1:], "little": ((0, 6, 0),) + STRAIGHT[1:], "thumb": ((0, -10, 20),) + STRAIGHT[1:]}),
+            hand(
+                "right",
+                frame(direction(8), (0, 1, 0.4)),
+                (-0.06, 0.0, 1.0),
+                {
+                    "index": ((0, -3, 0),) + STRAIGHT[1:],
+                    "ring": ((0, 3, 0),) + STRAIGHT[1:],
+                    "little": ((0, 6, 0),) + STRAIGHT[1:],
+                    "thumb": ((0, -10, 20),) + STRAIGHT[1:],
+                },
+            ),
+            hand(
+                "left",
+                frame(direction(-8), (0, -1, 0.4)),
+                (-0.06, -0.05, 0.98),
+                {
+                    "index": ((0, -3, 0),) + STRAIGHT[1:],
+                    "ring": ((0, 3, 0),) + STRAIGHT[1:],
+                    "little": ((0, 6, 0),) + STRAIGHT[1:],
+                    "thumb": ((0, -10, 20),) + STRAIGHT[1:],
+                },
+            ),
         ],
     ),
     "butterfly": (
         "Butterfly: palms to the lamp, hands crossed at the thumbs, fingers spread wide.",
         [
-            hand("right", frame(direction(125), (0, 0, -1)), (0.05, -0.1, 1.0), {"thumb": ((0, 30, 10),) + STRAIGHT[1:], "index": ((0, 18, 0),) + STRAIGHT[1:], "middle": ((0, 4, 0),) + STRAIGHT[1:], "ring": ((0, -10, 0),) + STRAIGHT[1:], "little": ((0, -25, 0),) + STRAIGHT[1:]}),
-            hand("left", frame(direction(55), (0, 0, -1)), (-0.05, -0.1, 1.0), {"thumb": ((0, 30, 10),) + STRAIGHT[1:], "index": ((0, 18, 0),) + STRAIGHT[1:], "middle": ((0, 4, 0),) + STRAIGHT[1:], "ring": ((0, -10, 0),) + STRAIGHT[1:], "little": ((0, -25, 0),) + STRAIGHT[1:]}),
+            hand(
+                "right",
+                frame(direction(125), (0, 0, -1)),
+                (0.05, -0.1, 1.0),
+                {
+                    "thumb": ((0, 30, 10),) + STRAIGHT[1:],
+                    "index": ((0, 18, 0),) + STRAIGHT[1:],
+                    "middle": ((0, 4, 0),) + STRAIGHT[1:],
+                    "ring": ((0, -10, 0),) + STRAIGHT[1:],
+                    "little": ((0, -25, 0),) + STRAIGHT[1:],
+                },
+            ),
+            hand(
+                "left",
+                frame(direction(55), (0, 0, -1)),
+                (-0.05, -0.1, 1.0),
+                {
+                    "thumb": ((0, 30, 10),) + STRAIGHT[1:],
+                    "index": ((0, 18, 0),) + STRAIGHT[1:],
+                    "middle": ((0, 4, 0),) + STRAIGHT[1:],
+                    "ring": ((0, -10, 0),) + STRAIGHT[1:],
+                    "little": ((0, -25, 0),) + STRAIGHT[1:],
+                },
+            ),
         ],
     ),
     "snail": (
         "Snail: a fist as the shell, the other hand's index and middle up as the feelers.",
         [
-            hand("right", frame(direction(60), (0.2, 0, 1)), (0.04, -0.06, 1.0), {"thumb": ((0, 0, 30), (0, 0, 40), (0, 0, 40)), "index": CURLED, "middle": CURLED, "ring": CURLED, "little": CURLED}, wrist=(30, 0)),
-            hand("left", frame(direction(80), (0, 0, 1)), (-0.05, -0.1, 0.97), {"thumb": ((0, 0, 40), (0, 0, 40), (0, 0, 30)), "index": ((0, 8, 0),) + STRAIGHT[1:], "middle": ((0, -8, 0),) + STRAIGHT[1:], "ring": CURLED, "little": CURLED}),
+            hand(
+                "right",
+                frame(direction(60), (0.2, 0, 1)),
+                (0.04, -0.06, 1.0),
+                {
+                    "thumb": ((0, 0, 30), (0, 0, 40), (0, 0, 40)),
+                    "index": CURLED,
+                    "middle": CURLED,
+                    "ring": CURLED,
+                    "little": CURLED,
+                },
+                wrist=(30, 0),
+            ),
+            hand(
+                "left",
+                frame(direction(80), (0, 0, 1)),
+                (-0.05, -0.1, 0.97),
+                {
+                    "thumb": ((0, 0, 40), (0, 0, 40), (0, 0, 30)),
+                    "index": ((0, 8, 0),) + STRAIGHT[1:],
+                    "middle": ((0, -8, 0),) + STRAIGHT[1:],
+                    "ring": CURLED,
+                    "little": CURLED,
+                },
+            ),
         ],
     ),
     "eagle": (
         "Eagle: wrists crossed, palms to the wall, thumbs up as the head, fingers spread as the wings.",
         [
-            hand("right", frame(direction(160), (0, 0, 1)), (0.02, -0.08, 1.0), {"thumb": ((0, 45, 0),) + STRAIGHT[1:], "index": ((0, 12, 0),) + STRAIGHT[1:], "ring": ((0, -10, 0),) + STRAIGHT[1:], "little": ((0, -20, 0),) + STRAIGHT[1:]}),
-            hand("left", frame(direction(20), (0, 0, 1)), (-0.02, -0.08, 1.0), {"thumb": ((0, 45, 0),) + STRAIGHT[1:], "index": ((0, 12, 0),) + STRAIGHT[1:], "ring": ((0, -10, 0),) + STRAIGHT[1:], "little": ((0, -20, 0),) + STRAIGHT[1:]}),
+            hand(
+                "right",
+                frame(direction(160), (0, 0, 1)),
+                (0.02, -0.08, 1.0),
+                {
+                    "thumb": ((0, 45, 0),) + STRAIGHT[1:],
+                    "index": ((0, 12, 0),) + STRAIGHT[1:],
+                    "ring": ((0, -10, 0),) + STRAIGHT[1:],
+                    "little": ((0, -20, 0),) + STRAIGHT[1:],
+                },
+            ),
+            hand(
+                "left",
+                frame(direction(20), (0, 0, 1)),
+                (-0.02, -0.08, 1.0),
+                {
+                    "thumb": ((0, 45, 0),) + STRAIGHT[1:],
+                    "index": ((0, 12, 0),) + STRAIGHT[1:],
+                    "ring": ((0, -10, 0),) + STRAIGHT[1:],
+                    "little": ((0, -20, 0),) + STRAIGHT[1:],
+                },
+            ),
         ],
     ),
     "heart": (
         "Heart: both hands, fingers curled over to meet at the top, thumbs meeting below.",
         [
-            hand("right", frame(direction(110), (0, 0, 1)), (0.05, -0.09, 1.0), {"thumb": ((0, 20, 10), (0, 0, 10), (0, 0, 10)), "index": HALF, "middle": HALF, "ring": HALF, "little": HALF}, wrist=(0, -10)),
-            hand("left", frame(direction(70), (0, 0, 1)), (-0.05, -0.09, 1.0), {"thumb": ((0, 20, 10), (0, 0, 10), (0, 0, 10)), "index": HALF, "middle": HALF, "ring": HALF, "little": HALF}, wrist=(0, -10)),
+            hand(
+                "right",
+                frame(direction(110), (0, 0, 1)),
+                (0.05, -0.09, 1.0),
+                {
+                    "thumb": ((0, 20, 10), (0, 0, 10), (0, 0, 10)),
+                    "index": HALF,
+                    "middle": HALF,
+                    "ring": HALF,
+                    "little": HALF,
+                },
+                wrist=(0, -10),
+            ),
+            hand(
+                "left",
+                frame(direction(70), (0, 0, 1)),
+                (-0.05, -0.09, 1.0),
+                {
+                    "thumb": ((0, 20, 10), (0, 0, 10), (0, 0, 10)),
+                    "index": HALF,
+                    "middle": HALF,
+                    "ring": HALF,
+                    "little": HALF,
+                },
+                wrist=(0, -10),
+            ),
         ],
     ),
     "spider": (
         "Spider: palms to the lamp, hands crossed, thumbs hooked, fingers bent as legs.",
         [
-            hand("right", frame(direction(100), (0, 0, -1)), (0.03, -0.1, 1.0), {"thumb": ((0, 30, 20),) + STRAIGHT[1:], "index": ((0, 15, 30), (0, 0, 40), (0, 0, 20)), "middle": ((0, 5, 30), (0, 0, 40), (0, 0, 20)), "ring": ((0, -8, 30), (0, 0, 40), (0, 0, 20)), "little": ((0, -18, 30), (0, 0, 40), (0, 0, 20))}),
-            hand("left", frame(direction(80), (0, 0, -1)), (-0.03, -0.1, 1.0), {"thumb": ((0, 30, 20),) + STRAIGHT[1:], "index": ((0, 15, 30), (0, 0, 40), (0, 0, 20)), "middle": ((0, 5, 30), (0, 0, 40), (0, 0, 20)), "ring": ((0, -8, 30), (0, 0, 40), (0, 0, 20)), "little": ((0, -18, 30), (0, 0, 40), (0, 0, 20))}),
+            hand(
+                "right",
+                frame(direction(100), (0, 0, -1)),
+                (0.03, -0.1, 1.0),
+                {
+                    "thumb": ((0, 30, 20),) + STRAIGHT[1:],
+                    "index": ((0, 15, 30), (0, 0, 40), (0, 0, 20)),
+                    "middle": ((0, 5, 30), (0, 0, 40), (0, 0, 20)),
+                    "ring": ((0, -8, 30), (0, 0, 40), (0, 0, 20)),
+                    "little": ((0, -18, 30), (0, 0, 40), (0, 0, 20)),
+                },
+            ),
+            hand(
+                "left",
+                frame(direction(80), (0, 0, -1)),
+                (-0.03, -0.1, 1.0),
+                {
+                    "thumb": ((0, 30, 20),) + STRAIGHT[1:],
+                    "index": ((0, 15, 30), (0, 0, 40), (0, 0, 20)),
+                    "middle": ((0, 5, 30), (0, 0, 40), (0, 0, 20)),
+                    "ring": ((0, -8, 30), (0, 0, 40), (0, 0, 20)),
+                    "little": ((0, -18, 30), (0, 0, 40), (0, 0, 20)),
+                },
+            ),
         ],
     ),
     "goose": (
         "Goose: the arm raised as the neck, the hand bent forward at the wrist, thumb and fingers as the bill.",
         [
-            hand("right", frame(direction(10), (0, 1, 0.2)), (-0.02, 0.1, 1.0), {"thumb": ((0, -10, 10),) + STRAIGHT[1:], "index": ((0, -3, 25), (0, 0, 20), (0, 0, 10)), "middle": ((0, 0, 25), (0, 0, 20), (0, 0, 10)), "ring": ((0, 3, 25), (0, 0, 20), (0, 0, 10)), "little": ((0, 6, 25), (0, 0, 20), (0, 0, 10))}, wrist=(70, 0)),
+            hand(
+                "right",
+                frame(direction(10), (0, 1, 0.2)),
+                (-0.02, 0.1, 1.0),
+                {
+                    "thumb": ((0, -10, 10),) + STRAIGHT[1:],
+                    "index": ((0, -3, 25), (0, 0, 20), (0, 0, 10)),
+                    "middle": ((0, 0, 25), (0, 0, 20), (0, 0, 10)),
+                    "ring": ((0, 3, 25), (0, 0, 20), (0, 0, 10)),
+                    "little": ((0, 6, 25), (0, 0, 20), (0, 0, 10)),
+                },
+                wrist=(70, 0),
+            ),
         ],
     ),
 }
@@ -240,7 +426,13 @@ if __name__ == "__main__":
     scene = Scene.default(192, 192)
     tiles = []
     for name, (about, hands) in POSES.items():
-        data = {"format": "handshadow.pose/1", "about": about, "scene": Scene.default(256, 256).to_json(), "forearm": True, "hands": hands}
+        data = {
+            "format": "handshadow.pose/1",
+            "about": about,
+            "scene": Scene.default(256, 256).to_json(),
+            "forearm": True,
+            "hands": hands,
+        }
         (LIBRARY / f"{name}.json").write_text(json.dumps(data, indent=1) + "\n")
         pose_set = parse_pose({**data, "scene": scene.to_json()})
         with torch.no_grad():

@@ -59,17 +59,23 @@ def resolve_device(name: str) -> str:
 def cmd_fit(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
 
+    from handshadow.target import load_target
+
     out = Path(args.out) if args.out else Path("out") / Path(args.target).stem
     ResultFolder(out, args.force)  # refuse a non-empty folder before any work
-    from handshadow.pipeline import fit_to_folder, resolve_target
-
-    resolve_target(args.target, 64, 64, args.invert)  # bad targets fail fast, before the models load
+    load_target(examples.target_path(args.target), 64, 64, args.invert)  # bad targets fail fast, before torch loads
     config = _fit_config(args)
-    folder, result, lines = fit_to_folder(args.target, out, config, force=args.force, invert=args.invert, show_progress=not args.quiet)
+    from handshadow.pipeline import fit_to_folder
+
+    folder, result, lines = fit_to_folder(
+        args.target, out, config, force=args.force, invert=args.invert, show_progress=not args.quiet
+    )
     s = result.score
     if not args.quiet:
         state = "interrupted; best so far" if result.interrupted else ("success" if s.success else "done")
-        print(f"{state}: IoU {s.iou:.3f}, thin parts {s.thin_recall:.2f}, HD95 {s.hd95:.3f}, {result.steps} steps, {result.seconds:.0f} s")
+        print(
+            f"{state}: IoU {s.iou:.3f}, thin parts {s.thin_recall:.2f}, HD95 {s.hd95:.3f}, {result.steps} steps, {result.seconds:.0f} s"
+        )
         for line in lines:
             print(line)
         print(f"results in {folder}/ (guide.png shows how to hold your hands)")
@@ -107,14 +113,18 @@ def _fit_config(args: argparse.Namespace):
 def cmd_interpolate(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
 
+    from handshadow.target import load_target
+
     out = Path(args.out) if args.out else Path("out") / f"{Path(args.a).stem}-to-{Path(args.b).stem}"
     ResultFolder(out, args.force)
-    from handshadow.pipeline import interpolate_to_folder, resolve_target
-
     for source in (args.a, args.b):
-        resolve_target(source, 64, 64)
+        load_target(examples.target_path(source), 64, 64)
     config = _fit_config(args)
-    folder, report = interpolate_to_folder(args.a, args.b, out, config, frames=args.frames, force=args.force, show_progress=not args.quiet)
+    from handshadow.pipeline import interpolate_to_folder
+
+    folder, report = interpolate_to_folder(
+        args.a, args.b, out, config, frames=args.frames, force=args.force, show_progress=not args.quiet
+    )
     if not args.quiet:
         print(f"results in {folder}/ (animation.mp4, animation.gif, poses.json, path.png, frames/)")
     print(report.summary())
@@ -122,7 +132,12 @@ def cmd_interpolate(args: argparse.Namespace) -> int:
 
 
 def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto") -> None:
-    p.add_argument("--hands", default=hands_default, choices=["1", "2", "auto"] if hands_default == "auto" else ["1", "2"], help=f"number of hands (default: {hands_default})")
+    p.add_argument(
+        "--hands",
+        default=hands_default,
+        choices=["1", "2", "auto"] if hands_default == "auto" else ["1", "2"],
+        help=f"number of hands (default: {hands_default})",
+    )
     p.add_argument("--size", type=int, default=256, help="frame height and width in pixels (default 256)")
     p.add_argument("--iters", type=int, help="total optimisation steps (default: set by --quality)")
     p.add_argument("--quality", default="default", choices=["fast", "default", "best"])
@@ -156,7 +171,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("target", help="an image file (PNG, JPEG, GIF, BMP) or a built-in example name")
     p.add_argument("--out", help="output folder (default: out/<target name>)")
     _add_fit_options(p)
-    p.add_argument("--invert", action="store_true", default=None, help="the shape is lighter than the ground (overrides the automatic choice)")
+    p.add_argument(
+        "--invert",
+        action="store_true",
+        default=None,
+        help="the shape is lighter than the ground (overrides the automatic choice)",
+    )
     p.set_defaults(func=cmd_fit)
 
     p = sub.add_parser("interpolate", help="morph one hand shadow into another: a pose path to perform")

@@ -1,7 +1,7 @@
 """Fitting hands to a target shadow: configuration, starts, search, result. No file output.
 
-    result = fit_frame(target_frame, FitConfig(hands="2"))
-    result.pose_set     # PoseSet (hands + scene + fit info), ready to save or render
+result = fit_frame(target_frame, FitConfig(hands="2"))
+result.pose_set     # PoseSet (hands + scene + fit info), ready to save or render
 """
 
 from __future__ import annotations
@@ -73,7 +73,11 @@ def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
     n_random, n_keep, stages = {
-        "fast": (24, 8, [Stage(64, 6, 12, 60, 3, 1.0, 1.0), Stage(128, 2, 6, 50, 1, 0.7, 0.3), Stage(size, 0, 3, 40, 1, 0.4, 0.05)]),
+        "fast": (
+            24,
+            8,
+            [Stage(64, 6, 12, 60, 3, 1.0, 1.0), Stage(128, 2, 6, 50, 1, 0.7, 0.3), Stage(size, 0, 3, 40, 1, 0.4, 0.05)],
+        ),
         "default": (
             128,
             32,
@@ -84,7 +88,15 @@ def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list
                 Stage(size, 0, 2, 100, 1, 0.15, 0.0),
             ],
         ),
-        "best": (192, 48, [Stage(64, 8, 16, 200, 8, 1.0, 1.0), Stage(128, 3, 8, 150, 3, 0.7, 0.3), Stage(size, 0, 4, 250, 1, 0.4, 0.05)]),
+        "best": (
+            192,
+            48,
+            [
+                Stage(64, 8, 16, 200, 8, 1.0, 1.0),
+                Stage(128, 3, 8, 150, 3, 0.7, 0.3),
+                Stage(size, 0, 4, 250, 1, 0.4, 0.05),
+            ],
+        ),
     }[quality]
     stages = [dataclasses.replace(s, height=min(s.height, size)) for s in stages]
     if iters is not None:
@@ -151,13 +163,20 @@ def fit_frame(
         "interrupted": any(r[1].interrupted for r in results),
     }
     pose_set = PoseSet(hands=tuple(hand_poses), scene=scene, forearm=config.forearm, fit=info)
-    return FitResult(pose_set, sc, shadow, np.asarray(target, bool), steps, seconds, info["interrupted"], poses, searcher)
+    return FitResult(
+        pose_set, sc, shadow, np.asarray(target, bool), steps, seconds, info["interrupted"], poses, searcher
+    )
 
 
 def _fit_hands(target, scene, n_hands, config, progress, deadline, extra_starts=None, anchor=None):
     sides = ["right", "left"][:n_hands] if n_hands == 2 else ["right"]
     dtype = torch.float32
-    hands = [load_hand(config.hand_model, s, mano_dir=config.mano_dir, forearm=config.forearm, dtype=dtype, device=config.device) for s in sides]
+    hands = [
+        load_hand(
+            config.hand_model, s, mano_dir=config.mano_dir, forearm=config.forearm, dtype=dtype, device=config.device
+        )
+        for s in sides
+    ]
     limits = [
         Limits(
             torch.as_tensor(np.radians(joint_limits_deg(config.limits, s)), dtype=dtype, device=config.device),
@@ -167,20 +186,32 @@ def _fit_hands(target, scene, n_hands, config, progress, deadline, extra_starts=
     ]
     searcher = Searcher(scene, target, hands, limits, anchor=anchor)
     n_random, n_keep, stages = schedule(config.quality, config.iters, target.shape[0])
-    starts = initial_hypotheses(searcher, sides, limits, n_random, n_keep, np.random.default_rng(config.seed), extra_starts)
+    starts = initial_hypotheses(
+        searcher, sides, limits, n_random, n_keep, np.random.default_rng(config.seed), extra_starts
+    )
     res = searcher.run([h for h in starts.hands], stages, progress=progress, deadline_s=deadline)
     return n_hands, res, res.ranking[0], searcher, sides
 
 
-def initial_hypotheses(searcher: Searcher, sides, limits, n_random: int, n_keep: int, rng, extra: list[HandPoses] | None = None) -> Candidates:
+def initial_hypotheses(
+    searcher: Searcher, sides, limits, n_random: int, n_keep: int, rng, extra: list[HandPoses] | None = None
+) -> Candidates:
     """Library and random candidates, aligned to the target, the best n_keep of them (at most
     two from any one library pose, so the starts stay diverse); ``extra`` starts are always
     kept, both as given and aligned."""
     device = searcher.device
     lib = library_candidates(len(sides), sides)
-    parts = [lib, random_candidates(n_random, sides, [Limits(lim.joints.cpu(), lim.wrist.cpu()) for lim in limits], rng)]
+    parts = [
+        lib,
+        random_candidates(n_random, sides, [Limits(lim.joints.cpu(), lim.wrist.cpu()) for lim in limits], rng),
+    ]
     if extra is not None:
-        parts.append(Candidates([HandPoses(*(t.detach().cpu() for t in h.args())) for h in extra], ["extra"] * extra[0].pose_rad.shape[0]))
+        parts.append(
+            Candidates(
+                [HandPoses(*(t.detach().cpu() for t in h.args())) for h in extra],
+                ["extra"] * extra[0].pose_rad.shape[0],
+            )
+        )
     cand = Candidates.cat(parts)
     cand = Candidates([HandPoses(*(t.to(device) for t in h.args())) for h in cand.hands], cand.origin)
     small = 64
@@ -191,7 +222,14 @@ def initial_hypotheses(searcher: Searcher, sides, limits, n_random: int, n_keep:
     angle, scale, shift, _ = similarity_align(shadows.cpu(), target_small.cpu(), pivot, np.arange(0, 360, 20), scales)
     if searcher.scene.light.type != "point":
         scale = torch.ones_like(scale)
-    moved = apply_similarity(Candidates([HandPoses(*(t.cpu() for t in h.args())) for h in cand.hands], cand.origin), angle, scale, shift, searcher.scene, small)
+    moved = apply_similarity(
+        Candidates([HandPoses(*(t.cpu() for t in h.args())) for h in cand.hands], cand.origin),
+        angle,
+        scale,
+        shift,
+        searcher.scene,
+        small,
+    )
     moved = Candidates([HandPoses(*(t.to(device) for t in h.args())) for h in moved.hands], moved.origin)
     shadows = searcher.shadows(moved.hands, small).cpu()
     t = target_small.cpu()

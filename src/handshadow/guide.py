@@ -9,7 +9,14 @@ from handshadow.hands.rig import FINGERS
 from handshadow.posefile import HandPose
 from handshadow.scene import Scene
 
-_DIRS = {"up": (0, 1, 0), "down": (0, -1, 0), "left": (-1, 0, 0), "right": (1, 0, 0), "the lamp": (0, 0, 1), "the wall": (0, 0, -1)}
+_DIRS = {
+    "up": (0, 1, 0),
+    "down": (0, -1, 0),
+    "left": (-1, 0, 0),
+    "right": (1, 0, 0),
+    "the lamp": (0, 0, 1),
+    "the wall": (0, 0, -1),
+}
 
 
 def _word(vec: np.ndarray, scene: Scene) -> str:
@@ -22,7 +29,11 @@ def _word(vec: np.ndarray, scene: Scene) -> str:
     scores = [local @ np.asarray(_DIRS[n]) for n in names]
     best = names[int(np.argmax(scores))]
     second = names[int(np.argsort(scores)[-2])]
-    if sorted(scores)[-2] > 0.45 and {best, second} not in ({"up", "down"}, {"left", "right"}, {"the lamp", "the wall"}):
+    if sorted(scores)[-2] > 0.45 and {best, second} not in (
+        {"up", "down"},
+        {"left", "right"},
+        {"the lamp", "the wall"},
+    ):
         if best in ("up", "down") and second in ("left", "right"):
             return f"{best} and to the {second}"
         if best in ("left", "right") and second in ("up", "down"):
@@ -49,12 +60,18 @@ def describe_hand(hand: HandPose, scene: Scene) -> list[str]:
     lines = [
         f"{name}: fingers point {_word(fingers, scene)}, palm faces {_word(-back, scene).replace('to the ', '').replace('toward ', '')}.",
         f"  Wrist about {height * 100:.0f} cm from the wall."
-        + (f" Bend the wrist {abs(hand.wrist_deg[0]):.0f} degrees {'toward the palm' if hand.wrist_deg[0] > 0 else 'back'}." if abs(hand.wrist_deg[0]) >= 15 else ""),
+        + (
+            f" Bend the wrist {abs(hand.wrist_deg[0]):.0f} degrees {'toward the palm' if hand.wrist_deg[0] > 0 else 'back'}."
+            if abs(hand.wrist_deg[0]) >= 15
+            else ""
+        ),
     ]
     states = {}
     for f, finger in enumerate(FINGERS):
         states.setdefault(_finger_state(hand.pose_deg[3 * f : 3 * f + 3]), []).append(finger)
-    parts = [f"{' and '.join(names) if len(names) < 3 else ', '.join(names)} {state}" for state, names in states.items()]
+    parts = [
+        f"{' and '.join(names) if len(names) < 3 else ', '.join(names)} {state}" for state, names in states.items()
+    ]
     lines.append("  " + "; ".join(parts) + ".")
     spread = hand.pose_deg[[3, 6, 9, 12], 1]
     if np.ptp(spread) > 25:
@@ -75,7 +92,9 @@ def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) 
     from PIL import Image, ImageDraw, ImageFont
 
     h, w = view.shape[:2]
-    inset = Image.fromarray(shadow_overlay).resize((w // 3, w // 3 * shadow_overlay.shape[0] // shadow_overlay.shape[1]))
+    inset = Image.fromarray(shadow_overlay).resize(
+        (w // 3, w // 3 * shadow_overlay.shape[0] // shadow_overlay.shape[1])
+    )
     text_h = 18 * (len(lines) + 2)
     canvas = Image.new("RGB", (w, h + text_h), "white")
     canvas.paste(Image.fromarray(view), (0, 0))

@@ -75,7 +75,14 @@ def step_sizes_deg(path: list[HandPoses]) -> torch.Tensor:
     return torch.stack(steps, 1).amax(1)
 
 
-def refine_path(searcher: Searcher, path: list[HandPoses], morph: np.ndarray, steps: int = 200, weights: PathWeights = PathWeights(), height: int = 96) -> list[HandPoses]:
+def refine_path(
+    searcher: Searcher,
+    path: list[HandPoses],
+    morph: np.ndarray,
+    steps: int = 200,
+    weights: PathWeights = PathWeights(),
+    height: int = 96,
+) -> list[HandPoses]:
     """Optimise the in-between frames of a path (the first and last stay fixed)."""
     frames = path[0].pose_rad.shape[0]
     if frames <= 2:
@@ -87,7 +94,12 @@ def refine_path(searcher: Searcher, path: list[HandPoses], morph: np.ndarray, st
     from skimage.transform import resize
 
     morph_small = torch.as_tensor(
-        np.stack([resize(m.astype(float), (height, round(m.shape[1] * height / m.shape[0])), order=1, anti_aliasing=True) for m in morph]),
+        np.stack(
+            [
+                resize(m.astype(float), (height, round(m.shape[1] * height / m.shape[0])), order=1, anti_aliasing=True)
+                for m in morph
+            ]
+        ),
         dtype=searcher.dtype,
         device=searcher.device,
     )
@@ -168,7 +180,9 @@ def penetration_depth_mm(searcher: Searcher, path: list[HandPoses]) -> np.ndarra
 
 
 @torch.no_grad()
-def report(searcher: Searcher, path: list[HandPoses], target_a: np.ndarray, target_b: np.ndarray) -> tuple[PathReport, np.ndarray]:
+def report(
+    searcher: Searcher, path: list[HandPoses], target_a: np.ndarray, target_b: np.ndarray
+) -> tuple[PathReport, np.ndarray]:
     """Measures of a path, and its exact shadows (frames, H, W) bool at full resolution."""
     shadows = searcher.shadows(path).cpu().numpy() > 0.5
     a, b = np.asarray(target_a, bool), np.asarray(target_b, bool)

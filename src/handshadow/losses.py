@@ -110,7 +110,9 @@ def points_outside(points_xy: torch.Tensor, maps: TargetMaps) -> torch.Tensor:
     gx = (points_xy[..., 0] + w) / (3 * w) * 2 - 1
     gy = (points_xy[..., 1] + h) / (3 * h) * 2 - 1
     grid = torch.stack([gx, gy], -1)[:, None]  # (B, 1, P, 2)
-    d = torch.nn.functional.grid_sample(field.expand(points_xy.shape[0], -1, -1, -1), grid, align_corners=False, padding_mode="border")
+    d = torch.nn.functional.grid_sample(
+        field.expand(points_xy.shape[0], -1, -1, -1), grid, align_corners=False, padding_mode="border"
+    )
     return (d[:, 0, 0] ** 2).mean(1)
 
 

@@ -115,7 +115,9 @@ class FrameRecorder:
             self._next = p.done + self.every
 
 
-def progress_frames(frames: list, target: np.ndarray, scene: Scene, sides: list[str], pose_set: PoseSet, size: int = 220) -> list[np.ndarray]:
+def progress_frames(
+    frames: list, target: np.ndarray, scene: Scene, sides: list[str], pose_set: PoseSet, size: int = 220
+) -> list[np.ndarray]:
     """One picture per snapshot: the hands in 3D (from the performer's side) beside their
     shadow over the target."""
     from skimage.transform import resize
@@ -127,7 +129,10 @@ def progress_frames(frames: list, target: np.ndarray, scene: Scene, sides: list[
     out = []
     for f in frames:
         with torch.no_grad():
-            meshes = [(s, m(*p.args()).vertices[0].cpu().double().numpy(), m.faces.cpu().numpy()) for s, m, p in zip(sides, models, f.poses)]
+            meshes = [
+                (s, m(*p.args()).vertices[0].cpu().double().numpy(), m.faces.cpu().numpy())
+                for s, m, p in zip(sides, models, f.poses)
+            ]
         view = performer_view(scene, meshes, size=(size, size), supersample=1)
         small_target = resize(target.astype(float), f.shadow.shape, order=0) > 0.5
         ov = overlay_image(small_target, f.shadow > 0.5)
@@ -182,6 +187,12 @@ def fit_to_folder(
     result = fit_frame(frame, config, progress=on_progress)
     if bar is not None:
         bar.close()
+    from handshadow.search import Progress
+
+    done = recorder.frames[-1].done if recorder.frames else 0
+    recorder.frames.append(
+        Progress(-1, 0, done, max(done, 1), result.shadow.astype(np.float32), result.score.iou, result.poses)
+    )
     pose_set = parse_pose(result.pose_set.to_json())  # exactly what pose.json will hold
     meshes = pose_hands(pose_set, config.mano_dir)
     mask = exact_shadow(pose_set.scene, meshes)
@@ -255,7 +266,14 @@ def interpolate_to_folder(
     views, pictures = [], []
     for k in range(frames):
         with torch.no_grad():
-            meshes = [(side, hand(*p.select(slice(k, k + 1)).args()).vertices[0].cpu().double().numpy(), hand.faces.cpu().numpy()) for side, hand, p in zip(sides, searcher.hands, path)]
+            meshes = [
+                (
+                    side,
+                    hand(*p.select(slice(k, k + 1)).args()).vertices[0].cpu().double().numpy(),
+                    hand.faces.cpu().numpy(),
+                )
+                for side, hand, p in zip(sides, searcher.hands, path)
+            ]
         view = performer_view(scene, meshes, size=(config.size, config.size), supersample=1)
         shadow_rgb = np.repeat(mask_image(shadows[k])[..., None], 3, axis=2)
         views.append(view)
@@ -286,7 +304,9 @@ def path_pose_file(path, sides, template: PoseSet, rep) -> dict:
             q = p.select(slice(k, k + 1))
             hands.append(
                 HandPose(
-                    side, h0.model, h0.shape,
+                    side,
+                    h0.model,
+                    h0.shape,
                     np.degrees(q.pose_rad[0].cpu().double().numpy()),
                     q.rotation[0].cpu().double().numpy(),
                     q.translation[0].cpu().double().numpy(),

@@ -117,7 +117,9 @@ class Hypotheses(torch.nn.Module):
     def hand(self, i: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """(pose_rad (B, 15, 3), rotation (B, 3, 3), translation (B, 3), wrist_rad (B, 2)) of hand i."""
         pose = getattr(self, f"lo{i}") + getattr(self, f"span{i}") * torch.sigmoid(getattr(self, f"logits{i}"))
-        wrist = getattr(self, f"wrist_lo{i}") + getattr(self, f"wrist_span{i}") * torch.sigmoid(getattr(self, f"wrist_logits{i}"))
+        wrist = getattr(self, f"wrist_lo{i}") + getattr(self, f"wrist_span{i}") * torch.sigmoid(
+            getattr(self, f"wrist_logits{i}")
+        )
         rot = rotvec_to_rotmat(getattr(self, f"rotvec{i}")) @ getattr(self, f"rot0_{i}")
         return pose, rot, getattr(self, f"trans{i}"), wrist
 
@@ -187,7 +189,9 @@ class Searcher:
         self.weights = weights or Weights()
         self.device = hands[0].rest_vertices.device
         self.dtype = hands[0].rest_vertices.dtype
-        self.penetration = PenetrationModel([hand_spheres(h.rig, h.has_forearm) for h in hands], dtype=self.dtype).to(self.device)
+        self.penetration = PenetrationModel([hand_spheres(h.rig, h.has_forearm) for h in hands], dtype=self.dtype).to(
+            self.device
+        )
         self._renderers: dict[int, tuple[Scene, ShadowRenderer, losses.TargetMaps]] = {}
         lo, hi = scene.light_depth_range()
         self.height_range = (0.03, min(hi - 0.25, 3.0) if math.isfinite(hi) else 3.0)
@@ -198,7 +202,9 @@ class Searcher:
             full_h, full_w = self.target.shape
             width = max(1, round(full_w * height / full_h))
             scene = self.scene.with_size(width, height)
-            renderer = ShadowRenderer(scene, [h.faces for h in self.hands], [h.num_vertices for h in self.hands]).to(self.device)
+            renderer = ShadowRenderer(scene, [h.faces for h in self.hands], [h.num_vertices for h in self.hands]).to(
+                self.device
+            )
             small = self.target if height == full_h else _resize_mask(self.target, height, width)
             self._renderers[height] = (scene, renderer, losses.TargetMaps.build(small, self.device, self.dtype))
         return self._renderers[height]
@@ -294,7 +300,17 @@ class Searcher:
                     if progress and (step % every == 0 or step == stage.steps - 1):
                         best = int(torch.argmin(loss.detach()))
                         m = mask[best].detach().cpu().numpy()
-                        progress(Progress(si, step, done, total_steps, m, _iou_small(m, self.level(stage.height)[2]), [p.select(slice(best, best + 1)) for p in hyp.poses()]))
+                        progress(
+                            Progress(
+                                si,
+                                step,
+                                done,
+                                total_steps,
+                                m,
+                                _iou_small(m, self.level(stage.height)[2]),
+                                [p.select(slice(best, best + 1)) for p in hyp.poses()],
+                            )
+                        )
                     if deadline_s is not None and time.perf_counter() - t0 > deadline_s:
                         raise TimeoutError
                 keep = min(stage.keep, hyp.batch)

@@ -87,7 +87,9 @@ def _hand_poses(h, mirrored: bool, dtype) -> HandPoses:
     )
 
 
-def random_candidates(n: int, sides: list[str], limits: list[Limits], rng: np.random.Generator, depth_m: float = 1.0, dtype=torch.float32) -> Candidates:
+def random_candidates(
+    n: int, sides: list[str], limits: list[Limits], rng: np.random.Generator, depth_m: float = 1.0, dtype=torch.float32
+) -> Candidates:
     """n random hypotheses: each finger extended, half bent or curled; hands facing the wall,
     the lamp or sideways, pointing any way in the wall plane; two hands side by side."""
     hands = []
@@ -107,10 +109,16 @@ def random_candidates(n: int, sides: list[str], limits: list[Limits], rng: np.ra
             angle = rng.uniform(0, 2 * math.pi)
             fingers = np.array([math.cos(angle), math.sin(angle), rng.normal(0, 0.2)])
             face = rng.choice(3, p=[0.5, 0.3, 0.2])
-            back = [np.array([0, 0, 1.0]), np.array([0, 0, -1.0]), np.cross(fingers, [0, 0, 1.0]) * rng.choice([-1, 1])][face]
+            back = [
+                np.array([0, 0, 1.0]),
+                np.array([0, 0, -1.0]),
+                np.cross(fingers, [0, 0, 1.0]) * rng.choice([-1, 1]),
+            ][face]
             rots.append(_frame(fingers, back + rng.normal(0, 0.15, 3)))
         x = (0.06 if side == "right" else -0.06) if len(sides) == 2 else 0.0
-        trans = np.stack([np.full(n, x), np.full(n, -0.08), np.full(n, depth_m)], 1) + rng.normal(0, [0.03, 0.03, 0.05], (n, 3))
+        trans = np.stack([np.full(n, x), np.full(n, -0.08), np.full(n, depth_m)], 1) + rng.normal(
+            0, [0.03, 0.03, 0.05], (n, 3)
+        )
         hands.append(HandPoses(*(torch.as_tensor(a, dtype=dtype) for a in (pose, np.stack(rots), trans, wrist))))
     return Candidates(hands, ["random"] * n)
 
@@ -136,7 +144,11 @@ def similarity_align(
     A shadow point q (pixels from the pivot) goes to scale * R(angle) q + shift.
     """
     b, h, w = shadows.shape
-    yy, xx = torch.meshgrid(torch.arange(h, dtype=shadows.dtype) + 0.5 - pivot[1], torch.arange(w, dtype=shadows.dtype) + 0.5 - pivot[0], indexing="ij")
+    yy, xx = torch.meshgrid(
+        torch.arange(h, dtype=shadows.dtype) + 0.5 - pivot[1],
+        torch.arange(w, dtype=shadows.dtype) + 0.5 - pivot[0],
+        indexing="ij",
+    )
     area = shadows.sum((1, 2)).clamp(min=1)
     t_area = target.sum().clamp(min=1)
     c_s = torch.stack([(shadows * xx).sum((1, 2)) / area, (shadows * yy).sum((1, 2)) / area], 1)
@@ -199,10 +211,16 @@ def apply_similarity(
     handed = torch.sign(torch.cross(u, v, dim=0) @ n)
     rot = _axis_rotation(n, -angle * handed)  # (B, 3, 3)
     point = scene.light.type == "point"
-    lamp_h = float((np.asarray(scene.light.position) - np.asarray(scene.wall.point)) @ np.asarray(scene.wall.normal)) if point else None
+    lamp_h = (
+        float((np.asarray(scene.light.position) - np.asarray(scene.wall.point)) @ np.asarray(scene.wall.normal))
+        if point
+        else None
+    )
     axis_point = torch.as_tensor(pivot_point(scene), dtype=angle.dtype)
     hands = []
-    mean_h = torch.stack([((h.translation - torch.as_tensor(scene.wall.point, dtype=angle.dtype)) @ n) for h in cand.hands]).mean(0)
+    mean_h = torch.stack(
+        [((h.translation - torch.as_tensor(scene.wall.point, dtype=angle.dtype)) @ n) for h in cand.hands]
+    ).mean(0)
     if point:
         mag = lamp_h / (lamp_h - mean_h)
         new_h = lamp_h - lamp_h / (mag * scale)

@@ -55,7 +55,9 @@ def read_image(path: str | Path) -> np.ndarray:
     if image.shape[2] == 3:
         image = np.concatenate([image, np.ones_like(image[..., :1])], axis=2)
     if min(image.shape[:2]) < MIN_SIDE_PX:
-        raise TargetError(f"{path} is too small ({image.shape[1]} x {image.shape[0]} pixels; need {MIN_SIDE_PX} or more a side)")
+        raise TargetError(
+            f"{path} is too small ({image.shape[1]} x {image.shape[0]} pixels; need {MIN_SIDE_PX} or more a side)"
+        )
     return np.clip(image, 0.0, 1.0)
 
 
@@ -109,6 +111,10 @@ def check_target(frame: np.ndarray, name: str = "target") -> None:
     """Refuse shapes a fit cannot use: empty, nearly empty, or filling the frame."""
     share = float(frame.mean())
     if frame.sum() < 0.002 * frame.size or frame.sum() < 4:
-        raise TargetError(f"{name}: no shape found (the image looks empty; use --invert if the shape is lighter than the ground)")
+        raise TargetError(
+            f"{name}: no shape found (the image looks empty; use --invert if the shape is lighter than the ground)"
+        )
     if share > 0.9:
-        raise TargetError(f"{name}: the shape fills {share:.0%} of the frame; a shadow target needs a visible ground around it")
+        raise TargetError(
+            f"{name}: the shape fills {share:.0%} of the frame; a shadow target needs a visible ground around it"
+        )

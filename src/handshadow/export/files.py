@@ -76,6 +76,9 @@ def write_gif(path: Path, frames: list[np.ndarray], seconds_per_frame: float = 0
     """An animated GIF that loops; the last frame is held a little longer."""
     if not frames:
         return
+    if len(frames) == 1:
+        iio.imwrite(path, frames[0], extension=".gif")
+        return
     durations = [seconds_per_frame * 1000] * (len(frames) - 1) + [hold_last_s * 1000]
     iio.imwrite(path, np.stack(frames), extension=".gif", duration=durations, loop=0)
 
@@ -86,7 +89,14 @@ def write_mp4(path: Path, frames: list[np.ndarray], fps: int = 12) -> None:
         return
     h, w = frames[0].shape[:2]
     pad = ((0, h % 2), (0, w % 2), (0, 0))  # yuv420p wants even sizes
-    iio.imwrite(path, np.stack([np.pad(f, pad, mode="edge") for f in frames]), extension=".mp4", fps=fps, codec="libx264", macro_block_size=1)
+    iio.imwrite(
+        path,
+        np.stack([np.pad(f, pad, mode="edge") for f in frames]),
+        extension=".mp4",
+        fps=fps,
+        codec="libx264",
+        macro_block_size=1,
+    )
 
 
 def shadow_image(mask: np.ndarray) -> np.ndarray:

@@ -60,7 +60,10 @@ def scene_picture(
 
 
 def performer_view(
-    scene: Scene, hands: list[tuple[str, np.ndarray, np.ndarray]], size: tuple[int, int] = (640, 640), supersample: int = 2
+    scene: Scene,
+    hands: list[tuple[str, np.ndarray, np.ndarray]],
+    size: tuple[int, int] = (640, 640),
+    supersample: int = 2,
 ) -> np.ndarray:
     """The hands as the performer sees them: from just behind and above the lamp, looking at
     the wall, so left is left and right is right. Returns (H, W, 3) uint8."""

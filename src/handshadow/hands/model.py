@@ -56,7 +56,9 @@ class HandModel(torch.nn.Module):
         # Either way the mesh is closed: a forearm, or a cap over the wrist opening.
         verts, faces, weights = attach_forearm(rig) if forearm else cap_wrist(rig)
         self.forearm_bone = len(rig.bone_parents) if forearm else None  # an extra bone, last
-        self.register_buffer("wrist_centre", torch.as_tensor(wrist_centre(rig) if forearm else np.zeros(3), dtype=dtype))
+        self.register_buffer(
+            "wrist_centre", torch.as_tensor(wrist_centre(rig) if forearm else np.zeros(3), dtype=dtype)
+        )
         if forearm:
             centre, axis = forearm_axis(rig)
             axis_points = centre + np.linspace(0.04, FOREARM_LENGTH_M, 6)[:, None] * axis

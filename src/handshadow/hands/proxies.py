@@ -66,7 +66,9 @@ def hand_spheres(rig: HandRig, forearm: bool = True, per_segment: int = 3) -> Sp
     thickness = np.percentile(np.abs(palm_owned[:, 2] - np.median(palm_owned[:, 2])), 75) if len(palm_owned) else 0.012
     for knuckle in knuckles:
         for s in (0.3, 0.6, 0.85):
-            centres.append(wrist + s * (knuckle - wrist) + np.array([0, 0, np.median(palm_owned[:, 2]) if len(palm_owned) else 0]))
+            centres.append(
+                wrist + s * (knuckle - wrist) + np.array([0, 0, np.median(palm_owned[:, 2]) if len(palm_owned) else 0])
+            )
             radii.append(max(thickness, 0.008) * SHRINK)
             bones.append(0)
             parts.append(PALM)
@@ -137,7 +139,11 @@ class PenetrationModel(torch.nn.Module):
         self.register_buffer("reach", torch.as_tensor(reach, dtype=dtype))
         self.n_pairs = int(test.sum())
 
-    def centres(self, bone_transforms: list[tuple[torch.Tensor, torch.Tensor]], globals_: list[tuple[torch.Tensor, torch.Tensor]]) -> torch.Tensor:
+    def centres(
+        self,
+        bone_transforms: list[tuple[torch.Tensor, torch.Tensor]],
+        globals_: list[tuple[torch.Tensor, torch.Tensor]],
+    ) -> torch.Tensor:
         """(B, S, 3) world sphere centres from each hand's bone transforms (R (B, K, 3, 3),
         t (B, K, 3)) and global transform (rotation (B, 3, 3), translation (B, 3))."""
         out = []

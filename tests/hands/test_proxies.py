@@ -1,0 +1,75 @@
+"""The penetration penalty catches intersecting hands and spares poses that don't intersect."""
+
+import numpy as np
+import pytest
+import torch
+
+from handshadow.hands import load_hand
+from handshadow.hands.proxies import PenetrationModel, hand_spheres
+
+
+@pytest.fixture(scope="module")
+def pair():
+    hands = [load_hand("anny", s, dtype=torch.float64) for s in ("right", "left")]
+    model = PenetrationModel([hand_spheres(h.rig, h.has_forearm) for h in hands], dtype=torch.float64)
+    return hands, model
+
+
+def depth_mm(pair, poses, translations, rotations=None, wrists=None):
+    hands, model = pair
+    eye = torch.eye(3, dtype=torch.float64)[None]
+    outs, globals_ = [], []
+    for k, hand in enumerate(hands):
+        rot = eye if rotations is None else rotations[k]
+        trans = torch.tensor([translations[k]], dtype=torch.float64)
+        wrist = None if wrists is None else torch.tensor([wrists[k]], dtype=torch.float64)
+        outs.append(hand(poses[k], rot, trans, wrist))
+        globals_.append((rot, trans))
+    centres = model.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
+    return float(model.depths(centres).max()) * 1000
+
+
+def pose(**fingers):
+    p = torch.zeros(1, 15, 3, dtype=torch.float64)
+    names = ["thumb", "index", "middle", "ring", "little"]
+    for name, joints in fingers.items():
+        f = names.index(name)
+        p[0, 3 * f : 3 * f + 3] = torch.as_tensor(np.radians(joints), dtype=torch.float64)
+    return p
+
+
+APART = [(0.3, 0.0, 1.0), (-0.3, 0.0, 1.0)]
+
+
+def test_poses_that_do_not_intersect_are_free(pair):
+    rest = pose()
+    assert depth_mm(pair, [rest, rest], APART) == 0.0
+    spread = pose(index=[(0, 15, 0)] * 3, little=[(0, -20, 0)] * 3)
+    half_fist = pose(**{f: [(0, 0, 40), (0, 0, 50), (0, 0, 30)] for f in ("index", "middle", "ring", "little")})
+    assert depth_mm(pair, [spread, half_fist], APART) < 0.5
+    # Hands side by side, thumbs apart, and crossed wrists with a bent wrist: no contact.
+    assert depth_mm(pair, [rest, rest], [(0.12, 0.0, 1.0), (-0.12, 0.0, 1.0)]) == 0.0
+
+
+def test_hands_pushed_into_each_other_penetrate(pair):
+    rest = pose()
+    assert depth_mm(pair, [rest, rest], [(0.0, 0.0, 1.0), (0.02, 0.0, 1.0)]) > 10
+    # The left hand's fingers through the right palm: one hand in front of the other.
+    assert depth_mm(pair, [rest, rest], [(0.0, 0.0, 1.0), (0.0, 0.03, 1.005)]) > 5
+
+
+def test_a_finger_bent_through_its_neighbour_penetrates(pair):
+    crossing = pose(index=[(0, -45, 0), (0, 0, 0), (0, 0, 0)])  # far past the limit, into the middle finger
+    assert depth_mm(pair, [crossing, pose()], APART) > 5
+
+
+def test_forearms_crossing_through_each_other_penetrate(pair):
+    import roma
+
+    rest = pose()
+    down_right = roma.rotvec_to_rotmat(torch.tensor([[0.0, 0.0, 0.8]], dtype=torch.float64))
+    down_left = roma.rotvec_to_rotmat(torch.tensor([[0.0, 0.0, -0.8]], dtype=torch.float64))
+    # Two forearms at the same depth that cross in an X go through each other.
+    assert depth_mm(pair, [rest, rest], [(-0.1, 0.0, 1.0), (0.1, 0.0, 1.0)], [down_right, down_left]) > 10
+    # The same X with one arm 12 cm nearer the lamp passes in front: no contact.
+    assert depth_mm(pair, [rest, rest], [(-0.1, 0.0, 1.0), (0.1, 0.0, 1.12)], [down_right, down_left]) == 0.0

@@ -1,0 +1,105 @@
+"""`handshadow interpolate` between two shadows rendered from known poses."""
+
+import json
+import re
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+
+from handshadow.cli import main
+from handshadow.hands.kinematics import rotation_angle_deg, rotvec_to_rotmat, slerp_rotations
+from handshadow.interpolate import morph_targets, straight_path
+from handshadow.search import HandPoses
+from tests.test_fit import known_target
+
+
+def test_slerp_follows_the_geodesic():
+    r0 = rotvec_to_rotmat(torch.tensor([0.3, -0.2, 0.1], dtype=torch.float64))
+    r1 = rotvec_to_rotmat(torch.tensor([-1.0, 2.0, 0.5], dtype=torch.float64))
+    path = slerp_rotations(r0, r1, torch.linspace(0, 1, 11, dtype=torch.float64))
+    steps = rotation_angle_deg(path[:-1], path[1:])
+    total = rotation_angle_deg(r0, r1)
+    assert torch.allclose(path[0], r0) and torch.allclose(path[-1], r1, atol=1e-9)
+    assert torch.allclose(steps, total / 10, atol=1e-6)  # equal steps along the shortest arc
+    assert torch.allclose(path @ path.transpose(-1, -2), torch.eye(3, dtype=torch.float64).expand(11, 3, 3), atol=1e-12)
+
+
+def test_straight_path_blends_angles_and_keeps_the_ends():
+    def one(angle, x):
+        return HandPoses(
+            torch.full((1, 15, 3), angle),
+            rotvec_to_rotmat(torch.tensor([[0.0, 0.0, angle]])),
+            torch.tensor([[x, 0.0, 1.0]]),
+            torch.zeros(1, 2),
+        )
+
+    path = straight_path([one(0.0, 0.0)], [one(1.0, 0.2)], 5)[0]
+    assert torch.allclose(path.pose_rad[:, 0, 0], torch.linspace(0, 1, 5))
+    assert torch.allclose(path.translation[:, 0], torch.linspace(0, 0.2, 5))
+
+
+def test_morph_targets_go_from_a_to_b():
+    a = np.zeros((40, 40), bool)
+    a[5:15, 5:15] = True
+    b = np.zeros((40, 40), bool)
+    b[22:38, 20:36] = True
+    m = morph_targets(a, b, 5)
+    assert np.array_equal(m[0], a) and np.array_equal(m[-1], b)
+
+
+@pytest.fixture(scope="module")
+def morph(tmp_path_factory):
+    d = tmp_path_factory.mktemp("interp")
+    for name in ("dog", "duck"):
+        mask, _ = known_target(name, 96)
+        iio.imwrite(d / f"{name}.png", np.where(mask, 0, 255).astype(np.uint8))
+    out = d / "out"
+    code = main(
+        [
+            "interpolate",
+            str(d / "dog.png"),
+            str(d / "duck.png"),
+            "--frames",
+            "16",
+            "--hands",
+            "1",
+            "--size",
+            "96",
+            "--quality",
+            "fast",
+            "--out",
+            str(out),
+            "--quiet",
+            "--device",
+            "cpu",
+        ]
+    )
+    assert code == 0
+    return out
+
+
+def test_interpolation_meets_the_bounds(morph, capsys):
+    poses = json.loads((morph / "poses.json").read_text())
+    summary = dict(re.findall(r"(\w+)=([\d.]+)", poses["summary"]))
+    assert float(summary["iou_start"]) >= 0.9 and float(summary["iou_end"]) >= 0.9
+    assert float(summary["max_step_deg"]) <= 10.0
+    assert int(summary["penetrating_frames"]) == 0
+
+
+def test_interpolation_outputs(morph, tmp_path):
+    names = {p.name for p in morph.iterdir()}
+    assert {"animation.gif", "animation.mp4", "poses.json", "path.png", "frames"} <= names
+    assert len(list((morph / "frames").glob("frame_*_shadow.png"))) == 16
+    assert len(list((morph / "frames").glob("frame_*_hands.png"))) == 16
+    assert (morph / "animation.mp4").stat().st_size > 1000
+    gif = iio.imread(morph / "animation.gif", index=None)
+    assert gif.shape[0] == 16
+    # poses.json is readable by render, frame by frame, and gives the frames' shadows.
+    for k in (0, 7, 15):
+        out = tmp_path / f"f{k}"
+        assert main(["render", str(morph / "poses.json"), "--frame", str(k), "--out", str(out)]) == 0
+        assert np.array_equal(
+            iio.imread(out / "shadow.png"), iio.imread(morph / "frames" / f"frame_{k:03d}_shadow.png")
+        )
