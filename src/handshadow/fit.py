@@ -83,8 +83,8 @@ def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list
             32,
             [
                 Stage(64, 8, 16, 160, 8, 1.0, 1.0),
-                Stage(128, 3, 8, 120, 3, 0.7, 0.3),
-                Stage(size, 1, 4, 160, 2, 0.4, 0.05),
+                Stage(128, 3, 8, 120, 4, 0.7, 0.3),
+                Stage(size, 1, 4, 160, 3, 0.4, 0.05),
                 Stage(size, 0, 2, 100, 1, 0.15, 0.0),
             ],
         ),

@@ -23,6 +23,7 @@ class TargetMaps:
 
     target: binary target; thin: its thin parts (what an opening of radius 4 % of the height
     removes); outside_dist: distance to the target outside it, in frame heights (0 inside);
+    inside_depth: distance to the target's outline inside it, in frame heights (0 outside);
     outside_dist_wide: (3H, 3W) the same over a canvas three frames wide, centred on the frame,
     for points whose shadow falls outside the frame; thin_points: (N, 2) pixel coordinates
     (x, y) of up to 256 thin-part pixels (evenly picked).
@@ -31,6 +32,7 @@ class TargetMaps:
     target: torch.Tensor
     thin: torch.Tensor
     outside_dist: torch.Tensor
+    inside_depth: torch.Tensor
     outside_dist_wide: torch.Tensor
     thin_points: torch.Tensor
 
@@ -48,6 +50,7 @@ class TargetMaps:
             target=torch.as_tensor(target, **t),
             thin=torch.as_tensor(thin, **t),
             outside_dist=torch.as_tensor(ndimage.distance_transform_edt(~target) / h, **t),
+            inside_depth=torch.as_tensor(ndimage.distance_transform_edt(target) / h, **t),
             outside_dist_wide=torch.as_tensor(ndimage.distance_transform_edt(~wide) / h, **t),
             thin_points=torch.as_tensor(np.stack([xs[pick] + 0.5, ys[pick] + 0.5], 1), **t),
         )

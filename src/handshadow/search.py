@@ -53,6 +53,8 @@ class Stage:
 class Weights:
     l2: float = 1.0
     thin: float = 4.0  # extra weight of the target's thin parts in the image term
+    depth: float = 20.0  # extra weight per frame height of depth inside the target (holes cost more)
+    depth_cap: float = 0.05
     excess: float = 2.0
     attraction: float = 0.3
     penetration: float = 0.02
@@ -226,7 +228,7 @@ class Searcher:
         blur = stage.blur_px * scale
         soft = gaussian_blur(mask, blur)
         target_soft = gaussian_blur(maps.target[None], blur)[0]
-        weight = 1.0 + w.thin * gaussian_blur(maps.thin[None], max(blur, 1.0))[0]
+        weight = 1.0 + w.thin * gaussian_blur(maps.thin[None], max(blur, 1.0))[0] + w.depth * maps.inside_depth.clamp(max=w.depth_cap)
         total = w.l2 * losses.weighted_l2(soft, target_soft, weight)
         total = total + w.excess * losses.excess(mask, maps.outside_dist)
         if w.attraction and stage.attract_px > 0:
