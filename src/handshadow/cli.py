@@ -152,6 +152,16 @@ def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto") ->
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
 
+def cmd_app(args: argparse.Namespace) -> int:
+    if args.port is not None and not 0 < args.port < 65536:
+        raise HandshadowError(f"--port must be 1..65535, got {args.port}")
+    from handshadow.app import launch
+
+    print(f"handshadow app on http://{args.host}:{args.port or 7860} (Ctrl-C to stop)")
+    launch(args.host, args.port, block=True)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="handshadow", description="Hand shadows: find, render and morph poses of your hands."
@@ -186,6 +196,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default: out/<a>-to-<b>)")
     _add_fit_options(p, hands_default="2")
     p.set_defaults(func=cmd_interpolate)
+
+    p = sub.add_parser("app", help="a local web page to make hand shadows")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1, this computer only)")
+    p.add_argument("--port", type=int, help="port (default: 7860 or the next free one)")
+    p.set_defaults(func=cmd_app)
 
     p = sub.add_parser("examples", help="list the built-in examples")
     p.set_defaults(func=cmd_examples)

@@ -152,12 +152,14 @@ def fit_to_folder(
     force: bool = False,
     invert: bool | None = None,
     show_progress: bool = True,
+    progress_hook=None,
 ):
     """Fit hands to a target and write the result folder: target.png, shadow.png, overlay.png,
     scene.json, pose.json, <side>.obj, hands.glb, scene.png, progress.gif, guide.png.
 
-    Ctrl-C during the search stops it and writes the best result so far, completely.
-    Returns (folder, FitResult)."""
+    Ctrl-C during the search (or a KeyboardInterrupt raised by ``progress_hook``, called with
+    each search.Progress) stops it and writes the best result so far, completely.
+    Returns (folder, FitResult, instruction lines)."""
     import sys
 
     from handshadow.export.files import write_gif
@@ -180,6 +182,8 @@ def fit_to_folder(
 
     def on_progress(p):
         recorder(p)
+        if progress_hook is not None:
+            progress_hook(p)
         if bar is not None:
             bar.n = min(total, p.done)
             bar.set_postfix(iou=f"{p.iou:.3f}")
