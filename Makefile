@@ -20,7 +20,14 @@ demo: $(VENV)/.installed
 	$(VENV)/bin/handshadow render two-hands --out out/demo --force
 	@echo "Results in out/demo/ (shadow.png, scene.png, hands.glb, ...)"
 
-test: $(VENV)/.installed
+# The browser tests drive Debian's Chromium (never `playwright install`, which downloads a browser).
+CHROMIUM := /usr/bin/chromium
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+$(CHROMIUM):
+	$(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq chromium
+
+test: $(VENV)/.installed $(CHROMIUM)
 	$(PY) -m pytest -q
 
 bench: $(VENV)/.installed

@@ -112,7 +112,6 @@ def build_app(store: SessionStore | None = None):
 
     from handshadow import examples
     from handshadow.errors import HandshadowError
-    from handshadow.export.images import overlay_image
     from handshadow.fit import FitConfig
     from handshadow.pipeline import fit_to_folder, interpolate_to_folder, resolve_target
 
@@ -134,7 +133,7 @@ def build_app(store: SessionStore | None = None):
             raise ValueError("pick an example")
         return example
 
-    def run_fit(source, upload, drawing, example, hands, limits, quality, light, request: gr.Request, progress=gr.Progress()):
+    def run_fit(source, upload, drawing, example, hands, limits, quality, light, request: gr.Request, progress=gr.Progress()):  # noqa: B008
         session = session_of(request)
         session.cancel.clear()
         job = session.new_job("fit")
@@ -170,7 +169,7 @@ def build_app(store: SessionStore | None = None):
             progress(min(1.0, p.done / max(p.total, 1)), desc=f"IoU {p.iou:.3f}")
             if last_preview is None or time.perf_counter() - last_preview > 0.7:
                 last_preview = time.perf_counter()
-                yield _preview(frame, p.shadow), f"Fitting... IoU {p.iou:.3f}", None, None, None, None, None, None
+                yield _preview(frame, p.shadow), f"Fitting... IoU {p.iou:.3f}", None
         thread.join()
         if "error" in outcome:
             raise gr.Error(str(outcome["error"]).splitlines()[0])
@@ -184,14 +183,19 @@ def build_app(store: SessionStore | None = None):
             + "\n\n"
             + "\n".join(line.strip() for line in lines)
         )
-        yield (
-            str(folder / "overlay.png"),
-            status,
+        yield str(folder / "overlay.png"), status, {"folder": str(folder), "zip": zip_path}
+
+    def show_result(done):
+        # A separate, non-streaming step: Gradio's 3D viewer does not mount from a generator.
+        if not done:
+            return [gr.skip()] * 6
+        folder = Path(done["folder"])
+        return (
             str(folder / "shadow.png"),
             str(folder / "hands.glb"),
             str(folder / "guide.png"),
             str(folder / "pose.json"),
-            zip_path,
+            done["zip"],
             str(folder / "progress.gif"),
         )
 
@@ -199,7 +203,7 @@ def build_app(store: SessionStore | None = None):
         session_of(request).cancel.set()
         return "Cancelling: keeping the best result so far..."
 
-    def run_morph(source_a, upload_a, example_a, source_b, upload_b, example_b, frames, hands, request: gr.Request, progress=gr.Progress()):
+    def run_morph(source_a, upload_a, example_a, source_b, upload_b, example_b, frames, hands, request: gr.Request, progress=gr.Progress()):  # noqa: B008
         session = session_of(request)
         job = session.new_job("morph")
         try:
@@ -219,42 +223,71 @@ def build_app(store: SessionStore | None = None):
         return str(folder / "animation.mp4"), str(folder / "animation.gif"), str(folder / "path.png"), report.summary(), zip_path
 
     with gr.Blocks(title="handshadow", analytics_enabled=False) as demo:
-        gr.Markdown("# handshadow\nMake a shadow with your hands: give a shape, press **Fit**, and copy the pose.")
+        gr.Markdown(
+            "# handshadow\n"
+            "Make a shadow with your hands. **1.** Choose a shape: an example, your own picture, or a drawing. "
+            "**2.** Press **Fit** and watch the hands find it. **3.** Turn the 3D hands around, read how to hold "
+            "them, and try it with a lamp and a wall."
+        )
         with gr.Tab("Shadow"):
             with gr.Row():
-                with gr.Column(scale=1):
-                    source = gr.Radio(["Example", "Upload", "Draw"], value="Example", label="Target")
-                    example = gr.Dropdown(example_names, value=example_names[0] if example_names else None, label="Example")
-                    upload = gr.Image(label="Upload an image (a dark shape on light, or light on dark)", type="numpy", image_mode="RGBA", sources=["upload", "clipboard"], elem_id="upload")
-                    drawing = gr.Sketchpad(label="Draw a shape", type="numpy", image_mode="RGBA", brush=gr.Brush(default_size=24, colors=["#000000"], color_mode="fixed"), canvas_size=(512, 512), elem_id="sketchpad")
-                    with gr.Row():
+                with gr.Column(scale=2, min_width=320):
+                    source = gr.Radio(["Example", "Upload", "Draw"], value="Example", label="Shape", elem_id="source")
+                    example = gr.Dropdown(example_names, value=example_names[0] if example_names else None, label="Example", elem_id="example")
+                    upload = gr.Image(
+                        label="Your picture: a dark shape on a light ground, or light on dark",
+                        type="numpy",
+                        image_mode="RGBA",
+                        sources=["upload", "clipboard"],
+                        visible=False,
+                        elem_id="upload",
+                    )
+                    drawing = gr.Sketchpad(
+                        label="Draw a filled shape (pick the brush first)",
+                        type="numpy",
+                        image_mode="RGBA",
+                        brush=gr.Brush(default_size=28, colors=["#000000"], color_mode="fixed"),
+                        canvas_size=(512, 512),
+                        visible=False,
+                        elem_id="sketchpad",
+                    )
+                    with gr.Accordion("Options", open=False):
                         hands = gr.Radio(["1", "2", "auto"], value="auto", label="Hands")
                         quality = gr.Radio(["fast", "default", "best"], value="fast", label="Quality", info=QUALITY_HELP)
-                    with gr.Row():
-                        limits = gr.Radio(["anatomical", "paper"], value="anatomical", label="Joint limits")
-                        light = gr.Radio(["point", "directional"], value="point", label="Light")
+                        limits = gr.Radio(["anatomical", "paper"], value="anatomical", label="Joint limits", info="anatomical: real ranges of motion; paper: Table 1 of the 2023 paper")
+                        light = gr.Radio(["point", "directional"], value="point", label="Light", info="point: a lamp 2 m from the wall; directional: sunlight")
                     with gr.Row():
                         fit_button = gr.Button("Fit", variant="primary", elem_id="fit")
                         cancel_button = gr.Button("Cancel", elem_id="cancel")
-                with gr.Column(scale=2):
-                    status = gr.Markdown("Pick a target and press Fit.", elem_id="status")
-                    with gr.Row():
-                        preview = gr.Image(label="Shadow over target (grey: both, red: extra shadow, blue: missing)", type="filepath", elem_id="preview")
-                        shadow = gr.Image(label="Shadow", type="filepath", elem_id="shadow")
-                    model = gr.Model3D(label="3D: hands, lamp (yellow) and wall", clear_color=(0.93, 0.94, 0.96, 1.0), elem_id="model3d", height=420)
+                    status = gr.Markdown("Pick a shape and press **Fit**.", elem_id="status")
                     guide = gr.Image(label="How to hold your hands", type="filepath", elem_id="guide")
+                with gr.Column(scale=3, min_width=420):
+                    with gr.Row():
+                        preview = gr.Image(label="Shadow over target: grey both, red extra, blue missing", type="filepath", elem_id="preview", height=300)
+                        shadow = gr.Image(label="The shadow", type="filepath", elem_id="shadow", height=300)
+                    model = gr.Model3D(label="3D: drag to turn. Hands, lamp (yellow) and wall", clear_color=(0.93, 0.94, 0.96, 1.0), elem_id="model3d", height=440)
                     with gr.Row():
                         pose_file = gr.File(label="pose.json", elem_id="pose")
                         zip_file = gr.File(label="Everything (zip)", elem_id="zip")
-                    progress_gif = gr.Image(label="The search", type="filepath", elem_id="progress")
-            fit_event = fit_button.click(
+                    with gr.Accordion("The search, step by step", open=False):
+                        progress_gif = gr.Image(label="progress.gif", type="filepath", elem_id="progress")
+
+            def show_source(choice):
+                return (
+                    gr.update(visible=choice == "Example"),
+                    gr.update(visible=choice == "Upload"),
+                    gr.update(visible=choice == "Draw"),
+                )
+
+            source.change(show_source, inputs=source, outputs=[example, upload, drawing], queue=False)
+            finished = gr.State(None)
+            fit_button.click(
                 run_fit,
                 inputs=[source, upload, drawing, example, hands, limits, quality, light],
-                outputs=[preview, status, shadow, model, guide, pose_file, zip_file, progress_gif],
+                outputs=[preview, status, finished],
                 concurrency_limit=1,
-            )
+            ).then(show_result, inputs=finished, outputs=[shadow, model, guide, pose_file, zip_file, progress_gif])
             cancel_button.click(cancel, outputs=[status], queue=False)
-            del fit_event
         with gr.Tab("Morph"):
             gr.Markdown("Two shadows in, a performance out: the poses that turn the first shadow into the second.")
             with gr.Row():
