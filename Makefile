@@ -17,8 +17,8 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 demo: $(VENV)/.installed
-	$(VENV)/bin/handshadow render two-hands --out out/demo --force
-	@echo "Results in out/demo/ (shadow.png, scene.png, hands.glb, ...)"
+	$(VENV)/bin/handshadow fit bird --out out/demo --force
+	@echo "Results in out/demo/: guide.png (how to hold your hands), overlay.png, shadow.png, scene.png, hands.glb, progress.gif"
 
 # The browser tests drive Debian's Chromium (never `playwright install`, which downloads a browser).
 CHROMIUM := /usr/bin/chromium

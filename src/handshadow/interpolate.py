@@ -121,7 +121,7 @@ def refine_path(
         blur = stage.blur_px * height / searcher.target.shape[0]
         sil = ((gaussian_blur(mask, blur) - gaussian_blur(morph_small, blur)) ** 2).mean((1, 2))
         centres = searcher.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
-        pen = losses.penetration(searcher.penetration.depths(centres))
+        pen = losses.penetration(searcher.penetration.depths(centres, searcher.light_position))
         place = losses.placement(h, lo, hi)
         smooth = accel = hinge = 0
         for pose, rot, trans, wrist in cur:

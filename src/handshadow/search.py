@@ -195,6 +195,9 @@ class Searcher:
             self.device
         )
         self._renderers: dict[int, tuple[Scene, ShadowRenderer, losses.TargetMaps]] = {}
+        self.light_position = (
+            torch.as_tensor(scene.light.position, dtype=self.dtype, device=self.device) if scene.light.type == "point" else None
+        )
         lo, hi = scene.light_depth_range()
         self.height_range = (0.03, min(hi - 0.25, 3.0) if math.isfinite(hi) else 3.0)
 
@@ -248,7 +251,7 @@ class Searcher:
         if self.anchor is not None:
             total = total + w.anchor * self._anchor_distance(globals_)
         centres = self.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
-        total = total + w.penetration * losses.penetration(self.penetration.depths(centres))
+        total = total + w.penetration * losses.penetration(self.penetration.depths(centres, self.light_position))
         total = total + w.placement * losses.placement(height, *self.height_range)
         total = total + w.forearm * self._forearm_terms(outs, globals_)
         return total, mask

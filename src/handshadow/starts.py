@@ -67,6 +67,8 @@ def library_candidates(n_hands: int, sides: list[str], dtype=torch.float32) -> C
                 else:
                     mirror_this = mirrored
                 picked.append(_hand_poses(h, mirror_this, dtype))
+            if len(picked) == 2:  # hands at one depth cannot pass in front of each other: part them
+                picked[0].translation[:, 2] += 0.02
             for k, hp in enumerate(picked):
                 out_hands[k].append(hp)
             origin.append(f"library:{name}" + (":mirrored" if mirrored else ""))

@@ -132,7 +132,9 @@ class PenetrationModel(torch.nn.Module):
             gap = s.radii[:, None] + s.radii[None, :] - np.linalg.norm(s.centres[:, None] - s.centres[None, :], axis=-1)
             allowance[block, block] = np.maximum(gap, 0.0)
             start += n
-        test |= owner[:, None] != owner[None, :]  # every pair across the hands
+        across = owner[:, None] != owner[None, :]
+        self.register_buffer("across", torch.as_tensor(across, dtype=torch.bool))
+        test |= across  # every pair across the hands
         test &= np.triu(np.ones_like(test), 1).astype(bool)
         # Dense (S, S) form: tested pairs reach r_i + r_j - allowance, the others never touch.
         reach = np.where(test, radii[:, None] + radii[None, :] - allowance, -1.0)
@@ -153,8 +155,22 @@ class PenetrationModel(torch.nn.Module):
             out.append(local @ rg.transpose(-1, -2) + tg[:, None])
         return torch.cat(out, 1)
 
-    def depths(self, centres: torch.Tensor) -> torch.Tensor:
+    def depths(self, centres: torch.Tensor, light: torch.Tensor | None = None) -> torch.Tensor:
         """(B, S * S) penetration depth of every pair of spheres, metres (0 when apart or when
-        the pair is not tested)."""
-        d = torch.cdist(centres, centres)
+        the pair is not tested).
+
+        With ``light`` (a point light's position (3,)), the two hands are pushed apart only
+        along the light's rays: moving a hand along a ray leaves its shadow where it is, so
+        resolving a crossing of the hands does not shift the shadow (one hand passes in front
+        of the other). Self-penetration keeps its full gradient (fingers must bend apart)."""
+        if light is None or not bool(self.across.any()):
+            d = torch.cdist(centres, centres)
+            return torch.relu(self.reach - d).flatten(1)
+        diff = centres[:, :, None, :] - centres[:, None, :, :]  # (B, S, S, 3)
+        with torch.no_grad():
+            ray = 0.5 * (centres[:, :, None, :] + centres[:, None, :, :]) - light
+            ray = ray / ray.norm(dim=-1, keepdim=True).clamp(min=1e-9)
+        along = (diff * ray).sum(-1, keepdim=True) * ray
+        across_only = torch.where(self.across[None, :, :, None], along + (diff - along).detach(), diff)
+        d = (across_only * across_only).sum(-1).clamp(min=1e-18).sqrt()
         return torch.relu(self.reach - d).flatten(1)
