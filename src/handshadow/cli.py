@@ -58,7 +58,6 @@ def resolve_device(name: str) -> str:
 
 def cmd_fit(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
-
     from handshadow.target import load_target
 
     out = Path(args.out) if args.out else Path("out") / Path(args.target).stem
@@ -112,7 +111,6 @@ def _fit_config(args: argparse.Namespace):
 
 def cmd_interpolate(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
-
     from handshadow.target import load_target
 
     out = Path(args.out) if args.out else Path("out") / f"{Path(args.a).stem}-to-{Path(args.b).stem}"

@@ -54,7 +54,7 @@ def app_url():
             break
         except OSError:
             if proc.poll() is not None:
-                raise RuntimeError("the app exited: " + proc.stdout.read())
+                raise RuntimeError("the app exited: " + proc.stdout.read()) from None
             time.sleep(0.5)
     else:
         proc.kill()
