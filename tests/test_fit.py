@@ -56,26 +56,7 @@ def test_fit_recovers_a_shadow_rendered_from_a_known_pose():
 @pytest.fixture(scope="module")
 def fitted(tmp_path_factory):
     out = tmp_path_factory.mktemp("fit") / "dog"
-    assert (
-        main(
-            [
-                "fit",
-                "dog",
-                "--hands",
-                "1",
-                "--size",
-                "96",
-                "--quality",
-                "fast",
-                "--out",
-                str(out),
-                "--quiet",
-                "--device",
-                "cpu",
-            ]
-        )
-        == 0
-    )
+    assert main("fit dog --hands 1 --size 96 --quality fast --quiet --device cpu --out".split() + [str(out)]) == 0
     return out
 
 

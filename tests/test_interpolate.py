@@ -56,26 +56,8 @@ def morph(tmp_path_factory):
         mask, _ = known_target(name, 96)
         iio.imwrite(d / f"{name}.png", np.where(mask, 0, 255).astype(np.uint8))
     out = d / "out"
-    code = main(
-        [
-            "interpolate",
-            str(d / "dog.png"),
-            str(d / "duck.png"),
-            "--frames",
-            "16",
-            "--hands",
-            "1",
-            "--size",
-            "96",
-            "--quality",
-            "fast",
-            "--out",
-            str(out),
-            "--quiet",
-            "--device",
-            "cpu",
-        ]
-    )
+    options = "--frames 16 --hands 1 --size 96 --quality fast --quiet --device cpu --out".split()
+    code = main(["interpolate", str(d / "dog.png"), str(d / "duck.png")] + options + [str(out)])
     assert code == 0
     return out
 

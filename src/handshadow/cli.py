@@ -129,7 +129,7 @@ def cmd_interpolate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto") -> None:
+def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", quality_default: str = "default") -> None:
     p.add_argument(
         "--hands",
         default=hands_default,
@@ -138,7 +138,7 @@ def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto") ->
     )
     p.add_argument("--size", type=int, default=256, help="frame height and width in pixels (default 256)")
     p.add_argument("--iters", type=int, help="total optimisation steps (default: set by --quality)")
-    p.add_argument("--quality", default="default", choices=["fast", "default", "best"])
+    p.add_argument("--quality", default=quality_default, choices=["fast", "default", "best"], help=f"search effort (default: {quality_default})")
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
@@ -192,7 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("b", help="the last target")
     p.add_argument("--frames", type=int, default=30, help="number of frames, ends included (default 30)")
     p.add_argument("--out", help="output folder (default: out/<a>-to-<b>)")
-    _add_fit_options(p, hands_default="2")
+    _add_fit_options(p, hands_default="2", quality_default="best")  # both ends must be good: a morph is judged by them
     p.set_defaults(func=cmd_interpolate)
 
     p = sub.add_parser("app", help="a local web page to make hand shadows")

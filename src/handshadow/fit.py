@@ -92,9 +92,10 @@ def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list
             192,
             48,
             [
-                Stage(64, 8, 16, 200, 8, 1.0, 1.0),
-                Stage(128, 3, 8, 150, 3, 0.7, 0.3),
-                Stage(size, 0, 4, 250, 1, 0.4, 0.05),
+                Stage(64, 8, 16, 240, 12, 1.0, 1.0),
+                Stage(128, 3, 8, 160, 4, 0.7, 0.3),
+                Stage(size, 1, 4, 220, 3, 0.4, 0.05),
+                Stage(size, 0, 2, 140, 1, 0.15, 0.0),
             ],
         ),
     }[quality]
