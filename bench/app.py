@@ -42,7 +42,12 @@ def main() -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    proc = subprocess.Popen([sys.executable, "-m", "handshadow.cli", "app", "--port", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy())
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "handshadow.cli", "app", "--port", str(port)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=os.environ.copy(),
+    )
     url = f"http://127.0.0.1:{port}/"
     try:
         for _ in range(240):
@@ -67,7 +72,10 @@ def main() -> None:
                 page.click("#fit")
                 page.wait_for_selector("#zip a[href]", timeout=600_000)
                 times.append(time.perf_counter() - t0)
-                print(f"run {run + 1}: {times[-1]:.1f} s ({page.locator('#status').inner_text().splitlines()[0]})", flush=True)
+                print(
+                    f"run {run + 1}: {times[-1]:.1f} s ({page.locator('#status').inner_text().splitlines()[0]})",
+                    flush=True,
+                )
                 page.close()
             browser.close()
         print(f"app_click_to_result_s={statistics.median(times):.1f}")

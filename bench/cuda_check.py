@@ -31,7 +31,10 @@ def parity() -> None:
     for device in ("cpu", "cuda"):
         hands = [load_hand("anny", s, dtype=torch.float64, device=device) for s in ("right", "left")]
         renderer = ShadowRenderer(scene, [h.faces for h in hands], [h.num_vertices for h in hands]).to(device)
-        verts = [h(pose.double().to(device), None, t.double().to(device)).vertices.detach().requires_grad_(True) for h, t in zip(hands, trans)]
+        verts = [
+            h(pose.double().to(device), None, t.double().to(device)).vertices.detach().requires_grad_(True)
+            for h, t in zip(hands, trans)
+        ]
         mask = renderer(verts)
         if target is None:
             target = torch.roll(mask.detach().cpu(), shifts=(3, -2), dims=(1, 2))
@@ -41,7 +44,9 @@ def parity() -> None:
     m_gpu, g_gpu = results["cuda"]
     differ = int((m_cpu != m_gpu).sum())
     rel = float((g_cpu - g_gpu).norm() / g_cpu.norm().clamp(min=1e-12))
-    print(f"parity (float64, 8 x 256 x 256): {differ} of {m_cpu.numel()} shadow pixels differ; gradient relative difference {rel:.2e}")
+    print(
+        f"parity (float64, 8 x 256 x 256): {differ} of {m_cpu.numel()} shadow pixels differ; gradient relative difference {rel:.2e}"
+    )
 
 
 def fits() -> None:
@@ -51,7 +56,9 @@ def fits() -> None:
         result = fit_frame(target, FitConfig(hands="2", device="cuda"))
         torch.cuda.synchronize()
         s = result.score
-        print(f"fit {name} on CUDA: IoU {s.iou:.3f}, HD95 {s.hd95:.3f}, thin {s.thin_recall:.2f}, success {s.success}, {time.perf_counter() - t0:.1f} s")
+        print(
+            f"fit {name} on CUDA: IoU {s.iou:.3f}, HD95 {s.hd95:.3f}, thin {s.thin_recall:.2f}, success {s.success}, {time.perf_counter() - t0:.1f} s"
+        )
 
 
 if __name__ == "__main__":

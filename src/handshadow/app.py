@@ -7,7 +7,6 @@ session works in its own temporary folder, deleted when the session ends and whe
 stops. Gradio is imported only here.
 """
 
-
 import atexit
 import os
 import queue
@@ -83,7 +82,9 @@ def _save_target(image, folder: Path) -> Path:
     if arr.ndim < 2 or arr.size == 0:
         raise ValueError("the target image is empty")
     if arr.shape[0] * arr.shape[1] > MAX_PIXELS:
-        raise ValueError(f"the image is too large ({arr.shape[1]} x {arr.shape[0]} pixels; at most {MAX_PIXELS // 1_000_000} megapixels)")
+        raise ValueError(
+            f"the image is too large ({arr.shape[1]} x {arr.shape[0]} pixels; at most {MAX_PIXELS // 1_000_000} megapixels)"
+        )
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "input.png"
     iio.imwrite(path, arr.astype(np.uint8) if arr.dtype != np.uint8 else arr)
@@ -133,7 +134,9 @@ def build_app(store: SessionStore | None = None):
             raise ValueError("pick an example")
         return example
 
-    def run_fit(source, upload, drawing, example, hands, limits, quality, light, request: gr.Request, progress=gr.Progress()):  # noqa: B008
+    def run_fit(
+        source, upload, drawing, example, hands, limits, quality, light, request: gr.Request, progress=gr.Progress()
+    ):  # noqa: B008
         session = session_of(request)
         session.cancel.clear()
         job = session.new_job("fit")
@@ -153,7 +156,9 @@ def build_app(store: SessionStore | None = None):
         def work():
             try:
                 config = FitConfig(hands=hands, quality=quality, limits=limits, light=light, device=_device())
-                outcome["result"] = fit_to_folder(target, job / "result", config, show_progress=False, progress_hook=on_progress)
+                outcome["result"] = fit_to_folder(
+                    target, job / "result", config, show_progress=False, progress_hook=on_progress
+                )
             except Exception as exc:  # shown in the page
                 outcome["error"] = exc
 
@@ -203,7 +208,18 @@ def build_app(store: SessionStore | None = None):
         session_of(request).cancel.set()
         return "Cancelling: keeping the best result so far..."
 
-    def run_morph(source_a, upload_a, example_a, source_b, upload_b, example_b, frames, hands, request: gr.Request, progress=gr.Progress()):  # noqa: B008
+    def run_morph(
+        source_a,
+        upload_a,
+        example_a,
+        source_b,
+        upload_b,
+        example_b,
+        frames,
+        hands,
+        request: gr.Request,
+        progress=gr.Progress(),
+    ):  # noqa: B008
         session = session_of(request)
         job = session.new_job("morph")
         try:
@@ -216,11 +232,19 @@ def build_app(store: SessionStore | None = None):
         progress(0.05, desc="fitting both ends and the path (a few minutes)")
         config = FitConfig(hands=hands, quality="fast", device=_device())
         try:
-            folder, report = interpolate_to_folder(a, b, job / "result", config, frames=int(frames), show_progress=False)
+            folder, report = interpolate_to_folder(
+                a, b, job / "result", config, frames=int(frames), show_progress=False
+            )
         except HandshadowError as exc:
             raise gr.Error(str(exc)) from None
         zip_path = shutil.make_archive(str(job / "handshadow-morph"), "zip", folder)
-        return str(folder / "animation.mp4"), str(folder / "animation.gif"), str(folder / "path.png"), report.summary(), zip_path
+        return (
+            str(folder / "animation.mp4"),
+            str(folder / "animation.gif"),
+            str(folder / "path.png"),
+            report.summary(),
+            zip_path,
+        )
 
     with gr.Blocks(title="handshadow", analytics_enabled=False) as demo:
         gr.Markdown(
@@ -233,7 +257,12 @@ def build_app(store: SessionStore | None = None):
             with gr.Row():
                 with gr.Column(scale=2, min_width=320):
                     source = gr.Radio(["Example", "Upload", "Draw"], value="Example", label="Shape", elem_id="source")
-                    example = gr.Dropdown(example_names, value=example_names[0] if example_names else None, label="Example", elem_id="example")
+                    example = gr.Dropdown(
+                        example_names,
+                        value=example_names[0] if example_names else None,
+                        label="Example",
+                        elem_id="example",
+                    )
                     upload = gr.Image(
                         label="Your picture: a dark shape on a light ground, or light on dark",
                         type="numpy",
@@ -253,9 +282,21 @@ def build_app(store: SessionStore | None = None):
                     )
                     with gr.Accordion("Options", open=False):
                         hands = gr.Radio(["1", "2", "auto"], value="auto", label="Hands")
-                        quality = gr.Radio(["fast", "default", "best"], value="fast", label="Quality", info=QUALITY_HELP)
-                        limits = gr.Radio(["anatomical", "paper"], value="anatomical", label="Joint limits", info="anatomical: real ranges of motion; paper: Table 1 of the 2023 paper")
-                        light = gr.Radio(["point", "directional"], value="point", label="Light", info="point: a lamp 2 m from the wall; directional: sunlight")
+                        quality = gr.Radio(
+                            ["fast", "default", "best"], value="fast", label="Quality", info=QUALITY_HELP
+                        )
+                        limits = gr.Radio(
+                            ["anatomical", "paper"],
+                            value="anatomical",
+                            label="Joint limits",
+                            info="anatomical: real ranges of motion; paper: Table 1 of the 2023 paper",
+                        )
+                        light = gr.Radio(
+                            ["point", "directional"],
+                            value="point",
+                            label="Light",
+                            info="point: a lamp 2 m from the wall; directional: sunlight",
+                        )
                     with gr.Row():
                         fit_button = gr.Button("Fit", variant="primary", elem_id="fit")
                         cancel_button = gr.Button("Cancel", elem_id="cancel")
@@ -263,9 +304,19 @@ def build_app(store: SessionStore | None = None):
                     guide = gr.Image(label="How to hold your hands", type="filepath", elem_id="guide")
                 with gr.Column(scale=3, min_width=420):
                     with gr.Row():
-                        preview = gr.Image(label="Shadow over target: grey both, red extra, blue missing", type="filepath", elem_id="preview", height=300)
+                        preview = gr.Image(
+                            label="Shadow over target: grey both, red extra, blue missing",
+                            type="filepath",
+                            elem_id="preview",
+                            height=300,
+                        )
                         shadow = gr.Image(label="The shadow", type="filepath", elem_id="shadow", height=300)
-                    model = gr.Model3D(label="3D: drag to turn. Hands, lamp (yellow) and wall", clear_color=(0.93, 0.94, 0.96, 1.0), elem_id="model3d", height=440)
+                    model = gr.Model3D(
+                        label="3D: drag to turn. Hands, lamp (yellow) and wall",
+                        clear_color=(0.93, 0.94, 0.96, 1.0),
+                        elem_id="model3d",
+                        height=440,
+                    )
                     with gr.Row():
                         pose_file = gr.File(label="pose.json", elem_id="pose")
                         zip_file = gr.File(label="Everything (zip)", elem_id="zip")
@@ -293,11 +344,15 @@ def build_app(store: SessionStore | None = None):
             with gr.Row():
                 with gr.Column():
                     source_a = gr.Radio(["Example", "Upload"], value="Example", label="First shadow")
-                    example_a = gr.Dropdown(example_names, value=example_names[0] if example_names else None, label="Example")
+                    example_a = gr.Dropdown(
+                        example_names, value=example_names[0] if example_names else None, label="Example"
+                    )
                     upload_a = gr.Image(label="Upload", type="numpy", image_mode="RGBA", sources=["upload"])
                 with gr.Column():
                     source_b = gr.Radio(["Example", "Upload"], value="Example", label="Last shadow")
-                    example_b = gr.Dropdown(example_names, value=example_names[1] if len(example_names) > 1 else None, label="Example")
+                    example_b = gr.Dropdown(
+                        example_names, value=example_names[1] if len(example_names) > 1 else None, label="Example"
+                    )
                     upload_b = gr.Image(label="Upload", type="numpy", image_mode="RGBA", sources=["upload"])
             with gr.Row():
                 frames = gr.Slider(8, 60, value=30, step=1, label="Frames")

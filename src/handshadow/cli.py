@@ -138,7 +138,12 @@ def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", qu
     )
     p.add_argument("--size", type=int, default=256, help="frame height and width in pixels (default 256)")
     p.add_argument("--iters", type=int, help="total optimisation steps (default: set by --quality)")
-    p.add_argument("--quality", default=quality_default, choices=["fast", "default", "best"], help=f"search effort (default: {quality_default})")
+    p.add_argument(
+        "--quality",
+        default=quality_default,
+        choices=["fast", "default", "best"],
+        help=f"search effort (default: {quality_default})",
+    )
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])

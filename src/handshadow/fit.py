@@ -136,7 +136,7 @@ def fit_frame(
     # Prefer one hand unless two are clearly better.
     best = min(results, key=lambda r: (r[2]["key"][0], r[2]["key"][1] - (0.02 if r[0] == 1 else 0.0)))
     n_hands, res, _, searcher, sides = best
-    poses = res.poses
+    poses = keep_between_light_and_wall(searcher, res.poses)
     shadow = searcher.shadows(poses)[0].cpu().numpy() > 0.5
     sc = score(shadow, target)
     hand_poses = [
@@ -167,6 +167,25 @@ def fit_frame(
     return FitResult(
         pose_set, sc, shadow, np.asarray(target, bool), steps, seconds, info["interrupted"], poses, searcher
     )
+
+
+@torch.no_grad()
+def keep_between_light_and_wall(searcher: Searcher, poses: list[HandPoses], margin_m: float = 0.005) -> list[HandPoses]:
+    """The placement penalty is soft; if any vertex still reaches the wall (or the light's
+    plane), move both hands along the wall normal just enough, so the result is physical."""
+    n = torch.as_tensor(searcher.scene.wall.normal, dtype=searcher.dtype, device=searcher.device)
+    w0 = torch.as_tensor(searcher.scene.wall.point, dtype=searcher.dtype, device=searcher.device)
+    heights = torch.cat([((hand(*p.args()).vertices - w0) @ n).flatten() for hand, p in zip(searcher.hands, poses)])
+    lo, hi = searcher.scene.light_depth_range()
+    shift = 0.0
+    if float(heights.min()) < lo + margin_m:
+        shift = lo + margin_m - float(heights.min())
+    elif float(heights.max()) > hi - margin_m:
+        shift = hi - margin_m - float(heights.max())
+    if shift == 0.0:
+        return poses
+    log.info("moved the hands %.1f mm along the wall normal to keep them off the wall and the light", shift * 1000)
+    return [HandPoses(p.pose_rad, p.rotation, p.translation + shift * n, p.wrist_rad) for p in poses]
 
 
 def _fit_hands(target, scene, n_hands, config, progress, deadline, extra_starts=None, anchor=None):

@@ -197,9 +197,20 @@ def fit_to_folder(
     recorder.frames.append(
         Progress(-1, 0, done, max(done, 1), result.shadow.astype(np.float32), result.score.iou, result.poses)
     )
+    from handshadow.metrics import score
+
     pose_set = parse_pose(result.pose_set.to_json())  # exactly what pose.json will hold
     meshes = pose_hands(pose_set, config.mano_dir)
     mask = exact_shadow(pose_set.scene, meshes)
+    # Report the measures of the shadow that is written (float64, from pose.json's values).
+    result.score = score(mask > 0.5, frame)
+    pose_set = dataclasses.replace(
+        pose_set,
+        fit={
+            **pose_set.fit,
+            **{k: (round(v, 4) if isinstance(v, float) else v) for k, v in result.score.as_dict().items()},
+        },
+    )
     scene = pose_set.scene
     sides = [h.side for h in pose_set.hands]
     frames = progress_frames(recorder.frames, frame, scene, sides, pose_set)

@@ -196,7 +196,9 @@ class Searcher:
         )
         self._renderers: dict[int, tuple[Scene, ShadowRenderer, losses.TargetMaps]] = {}
         self.light_position = (
-            torch.as_tensor(scene.light.position, dtype=self.dtype, device=self.device) if scene.light.type == "point" else None
+            torch.as_tensor(scene.light.position, dtype=self.dtype, device=self.device)
+            if scene.light.type == "point"
+            else None
         )
         lo, hi = scene.light_depth_range()
         self.height_range = (0.03, min(hi - 0.25, 3.0) if math.isfinite(hi) else 3.0)
@@ -231,7 +233,11 @@ class Searcher:
         blur = stage.blur_px * scale
         soft = gaussian_blur(mask, blur)
         target_soft = gaussian_blur(maps.target[None], blur)[0]
-        weight = 1.0 + w.thin * gaussian_blur(maps.thin[None], max(blur, 1.0))[0] + w.depth * maps.inside_depth.clamp(max=w.depth_cap)
+        weight = (
+            1.0
+            + w.thin * gaussian_blur(maps.thin[None], max(blur, 1.0))[0]
+            + w.depth * maps.inside_depth.clamp(max=w.depth_cap)
+        )
         total = w.l2 * losses.weighted_l2(soft, target_soft, weight)
         total = total + w.excess * losses.excess(mask, maps.outside_dist)
         if w.attraction and stage.attract_px > 0:

@@ -29,10 +29,21 @@ FLAGS = [
     "--host-resolver-rules=MAP * ~NOTFOUND , EXCLUDE 127.0.0.1",
 ]
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
-RESULT_FILES = {"target.png", "shadow.png", "overlay.png", "scene.json", "pose.json", "hands.glb", "guide.png", "progress.gif"}
+RESULT_FILES = {
+    "target.png",
+    "shadow.png",
+    "overlay.png",
+    "scene.json",
+    "pose.json",
+    "hands.glb",
+    "guide.png",
+    "progress.gif",
+}
 
 playwright = pytest.importorskip("playwright.sync_api")
-pytestmark = pytest.mark.skipif(not os.path.exists(CHROMIUM), reason="Debian's chromium is not installed (make test installs it)")
+pytestmark = pytest.mark.skipif(
+    not os.path.exists(CHROMIUM), reason="Debian's chromium is not installed (make test installs it)"
+)
 
 
 def _free_port() -> int:
@@ -45,7 +56,13 @@ def _free_port() -> int:
 def app_url():
     port = _free_port()
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "handshadow.cli", "app", "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "handshadow.cli", "app", "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
     url = f"http://127.0.0.1:{port}/"
     deadline = time.time() + 120
     while time.time() < deadline:
@@ -104,7 +121,9 @@ def _wait_result(page, timeout_s: float = 150) -> float:
 
 def _zip_names(page) -> tuple[set[str], zipfile.ZipFile]:
     href = page.locator("#zip a[href]").first.get_attribute("href")
-    data = urllib.request.urlopen(href if href.startswith("http") else page.url.rstrip("/") + "/" + href.lstrip("/"), timeout=30).read()
+    data = urllib.request.urlopen(
+        href if href.startswith("http") else page.url.rstrip("/") + "/" + href.lstrip("/"), timeout=30
+    ).read()
     z = zipfile.ZipFile(io.BytesIO(data))
     return set(z.namelist()), z
 
