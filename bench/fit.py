@@ -4,8 +4,8 @@ success).
 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--hands 2] [--out out/bench]
 
-Prints one row per target, writes a contact sheet (target | shadow | overlay per row) and a
-JSON of the rows to --out, and ends with
+Prints one row per target, writes a contact sheet (target | shadow | overlay per row), each
+shadow (shadows/NAME.png) and a JSON of the rows to --out, and ends with
 SUMMARY n=<n> median_iou=<x> success=<share> median_s=<x>
 """
 
@@ -85,6 +85,8 @@ def main() -> None:
             flush=True,
         )
         tiles.append(_sheet_row(target, result.shadow, path.stem, s.success))
+        (out / "shadows").mkdir(exist_ok=True)
+        iio.imwrite(out / "shadows" / f"{path.stem}.png", np.where(result.shadow, 0, 255).astype(np.uint8))
         (out / "rows.json").write_text(json.dumps(rows, indent=1))
     if tiles:
         iio.imwrite(out / "contact_sheet.png", np.concatenate(tiles, 0))

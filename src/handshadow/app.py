@@ -135,8 +135,17 @@ def build_app(store: SessionStore | None = None):
         return example
 
     def run_fit(
-        source, upload, drawing, example, hands, limits, quality, light, request: gr.Request, progress=gr.Progress()
-    ):  # noqa: B008
+        source,
+        upload,
+        drawing,
+        example,
+        hands,
+        limits,
+        quality,
+        light,
+        request: gr.Request,
+        progress=gr.Progress(),  # noqa: B008
+    ):
         session = session_of(request)
         session.cancel.clear()
         job = session.new_job("fit")
@@ -218,8 +227,8 @@ def build_app(store: SessionStore | None = None):
         frames,
         hands,
         request: gr.Request,
-        progress=gr.Progress(),
-    ):  # noqa: B008
+        progress=gr.Progress(),  # noqa: B008
+    ):
         session = session_of(request)
         job = session.new_job("morph")
         try:

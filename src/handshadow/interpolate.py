@@ -171,15 +171,6 @@ class PathReport:
 
 
 @torch.no_grad()
-def penetration_depth_mm(searcher: Searcher, path: list[HandPoses]) -> np.ndarray:
-    """(frames,) deepest proxy overlap per frame, millimetres."""
-    outs = [hand(*p.args()) for hand, p in zip(searcher.hands, path)]
-    globals_ = [(p.rotation, p.translation) for p in path]
-    centres = searcher.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
-    return (searcher.penetration.depths(centres).amax(1) * 1000).cpu().numpy()
-
-
-@torch.no_grad()
 def report(
     searcher: Searcher, path: list[HandPoses], target_a: np.ndarray, target_b: np.ndarray
 ) -> tuple[PathReport, np.ndarray]:
@@ -188,7 +179,7 @@ def report(
     a, b = np.asarray(target_a, bool), np.asarray(target_b, bool)
     start, end = score(shadows[0], a), score(shadows[-1], b)
     iou = lambda m, t: float((m & t).sum() / max((m | t).sum(), 1))  # noqa: E731
-    depth = penetration_depth_mm(searcher, path)
+    depth = searcher.penetration_mm(path).cpu().numpy()
     steps = step_sizes_deg(path).cpu().numpy()
     rep = PathReport(
         start.iou,

@@ -83,6 +83,19 @@ def attraction(shadow: torch.Tensor, target: torch.Tensor, sigma_px: float) -> t
     return -(shadow * field).mean((1, 2))
 
 
+def gaps(shadow: torch.Tensor, target: torch.Tensor, radius_px: int) -> torch.Tensor:
+    """Light leaking through the shadow where the target is solid: the pinholes, slits and narrow notches
+    between fingers that a closing (square, radius_px) of the shadow would fill. Their outlines
+    are few pixels for the image term but far from the target's outline (HD95) and plain to
+    see. The leak map is a constant of this step. (B, H, W), (H, W) -> (B,)."""
+    with torch.no_grad():
+        m = (shadow > 0.5).to(shadow.dtype)[:, None]
+        k = 2 * radius_px + 1
+        closed = -torch.nn.functional.max_pool2d(-torch.nn.functional.max_pool2d(m, k, 1, radius_px), k, 1, radius_px)
+        leaks = (closed - m).clamp(min=0)[:, 0] * target
+    return (leaks * (1 - shadow)).mean((1, 2))
+
+
 def penetration(depths_m: torch.Tensor, scale_m: float = 0.01) -> torch.Tensor:
     """Sum of squared penetration depths in units of scale_m. depths (B, P) metres -> (B,)."""
     return ((depths_m / scale_m) ** 2).sum(1)

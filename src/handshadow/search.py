@@ -63,6 +63,7 @@ class Weights:
     inside: float = 3.0  # joints and forearm axes project into the target
     thin_pull: float = 3.0  # fingers reach the target's thin parts
     anchor: float = 0.002  # closeness to anchor poses, when the search has some
+    gaps: float = 4.0  # light leaking between fingers where the target is solid (fine stages)
 
 
 @dataclasses.dataclass
@@ -216,9 +217,11 @@ class Searcher:
             self._renderers[height] = (scene, renderer, losses.TargetMaps.build(small, self.device, self.dtype))
         return self._renderers[height]
 
-    def objective(self, hyp: Hypotheses, stage: Stage) -> tuple[torch.Tensor, torch.Tensor]:
+    def objective(
+        self, hyp: Hypotheses, stage: Stage, weights: Weights | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Per-hypothesis loss (B,) and the exact shadow (B, H, W) at the stage resolution."""
-        w = self.weights
+        w = weights or self.weights
         scene, renderer, maps = self.level(stage.height)
         scale = stage.height / self.target.shape[0]
         outs, globals_ = [], []
@@ -240,6 +243,8 @@ class Searcher:
         )
         total = w.l2 * losses.weighted_l2(soft, target_soft, weight)
         total = total + w.excess * losses.excess(mask, maps.outside_dist)
+        if w.gaps and stage.blur_px <= 1:
+            total = total + w.gaps * losses.gaps(mask, maps.target, max(1, round(2 * scale)))
         if w.attraction and stage.attract_px > 0:
             total = total + w.attraction * losses.attraction(mask, maps.target, stage.attract_px * scale)
         if stage.skeleton > 0:
@@ -335,6 +340,35 @@ class Searcher:
         best = final[0]["index"]
         poses = [p.select(slice(best, best + 1)) for p in hyp.poses()]
         return SearchResult(poses, done, time.perf_counter() - t0, interrupted, final)
+
+    @torch.no_grad()
+    def penetration_mm(self, poses: list[HandPoses]) -> torch.Tensor:
+        """(B,) deepest overlap of any two collision proxies (within or across hands), mm."""
+        outs = [hand(*p.args()) for hand, p in zip(self.hands, poses)]
+        globals_ = [(p.rotation, p.translation) for p in poses]
+        centres = self.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
+        return self.penetration.depths(centres).amax(1) * 1000
+
+    def separate(self, poses: list[HandPoses], tol_mm: float = 1.0, max_steps: int = 150) -> list[HandPoses]:
+        """Resolve what penetration the search left (its penalty is soft so that hands may pass
+        through each other on the way): a few small steps of the full-resolution objective
+        with a penetration weight 100 times higher, until no proxies overlap by more than tol_mm.
+        Batch-1 poses in and out."""
+        if float(self.penetration_mm(poses).max()) <= tol_mm:
+            return poses
+        stage = Stage(self.target.shape[0], 0, 0, max_steps, 1, 0.15, 0.0)
+        weights = dataclasses.replace(self.weights, penetration=self.weights.penetration * 100)
+        hyp = Hypotheses(poses, self.limits).to(self.device)
+        opt = torch.optim.Adam(hyp.param_groups(stage.lr_scale))
+        for _ in range(max_steps):
+            opt.zero_grad(set_to_none=True)
+            loss, _ = self.objective(hyp, stage, weights)
+            loss.sum().backward()
+            opt.step()
+            if float(self.penetration_mm(hyp.poses()).max()) <= tol_mm:
+                break
+        log.info("separated the hands: deepest overlap %.1f mm", float(self.penetration_mm(hyp.poses()).max()))
+        return hyp.poses()
 
     @torch.no_grad()
     def shadows(self, poses: list[HandPoses], height: int | None = None) -> torch.Tensor:

@@ -33,6 +33,9 @@ class SphereSet:
     segment: np.ndarray
 
 
+SIDEWAYS = 0.25  # share of the sideways gradient kept between the two hands (see depths)
+
+
 def hand_spheres(rig: HandRig, forearm: bool = True, per_segment: int = 3) -> SphereSet:
     """Build the proxies of a rig (rest pose, hand frame)."""
     verts, weights = rig.rest_vertices, rig.skin_weights
@@ -162,7 +165,9 @@ class PenetrationModel(torch.nn.Module):
         With ``light`` (a point light's position (3,)), the two hands are pushed apart only
         along the light's rays: moving a hand along a ray leaves its shadow where it is, so
         resolving a crossing of the hands does not shift the shadow (one hand passes in front
-        of the other). Self-penetration keeps its full gradient (fingers must bend apart)."""
+        of the other). A quarter of the sideways gradient stays, for parts that lie along a ray
+        (a forearm pointing at the wall cannot leave another by sliding along it).
+        Self-penetration keeps its full gradient (fingers must bend apart)."""
         if light is None or not bool(self.across.any()):
             d = torch.cdist(centres, centres)
             return torch.relu(self.reach - d).flatten(1)
@@ -171,6 +176,9 @@ class PenetrationModel(torch.nn.Module):
             ray = 0.5 * (centres[:, :, None, :] + centres[:, None, :, :]) - light
             ray = ray / ray.norm(dim=-1, keepdim=True).clamp(min=1e-9)
         along = (diff * ray).sum(-1, keepdim=True) * ray
-        across_only = torch.where(self.across[None, :, :, None], along + (diff - along).detach(), diff)
+        side = diff - along
+        across_only = torch.where(
+            self.across[None, :, :, None], along + SIDEWAYS * side + (1 - SIDEWAYS) * side.detach(), diff
+        )
         d = (across_only * across_only).sum(-1).clamp(min=1e-18).sqrt()
         return torch.relu(self.reach - d).flatten(1)
