@@ -155,6 +155,8 @@ def test_ctrl_c_writes_the_best_result_so_far(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        # A shell that starts jobs in the background ignores SIGINT, and children inherit that.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     time.sleep(25)  # into the search (model loading and starts take a few seconds)
     proc.send_signal(signal.SIGINT)
