@@ -17,6 +17,7 @@ from handshadow.export.files import ResultFolder, shadow_image, write_json, writ
 from handshadow.export.meshes import round_vertices, write_glb, write_obj
 from handshadow.export.pictures import scene_picture
 from handshadow.hands import load_hand
+from handshadow.metrics import score
 from handshadow.posefile import PoseSet
 from handshadow.render import MeshTopology, shadow_mask
 from handshadow.scene import Scene
@@ -197,8 +198,6 @@ def fit_to_folder(
     recorder.frames.append(
         Progress(-1, 0, done, max(done, 1), result.shadow.astype(np.float32), result.score.iou, result.poses)
     )
-    from handshadow.metrics import score
-
     pose_set = parse_pose(result.pose_set.to_json())  # exactly what pose.json will hold
     meshes = pose_hands(pose_set, config.mano_dir)
     mask = exact_shadow(pose_set.scene, meshes)

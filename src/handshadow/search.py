@@ -353,20 +353,23 @@ class Searcher:
         """Resolve what penetration the search left (its penalty is soft so that hands may pass
         through each other on the way): a few small steps of the full-resolution objective
         with a penetration weight 100 times higher, until no proxies overlap by more than tol_mm.
-        Batch-1 poses in and out."""
+        Batch-1 poses in and out; Ctrl-C stops it and returns the poses reached."""
         if float(self.penetration_mm(poses).max()) <= tol_mm:
             return poses
         stage = Stage(self.target.shape[0], 0, 0, max_steps, 1, 0.15, 0.0)
         weights = dataclasses.replace(self.weights, penetration=self.weights.penetration * 100)
         hyp = Hypotheses(poses, self.limits).to(self.device)
         opt = torch.optim.Adam(hyp.param_groups(stage.lr_scale))
-        for _ in range(max_steps):
-            opt.zero_grad(set_to_none=True)
-            loss, _ = self.objective(hyp, stage, weights)
-            loss.sum().backward()
-            opt.step()
-            if float(self.penetration_mm(hyp.poses()).max()) <= tol_mm:
-                break
+        try:
+            for _ in range(max_steps):
+                opt.zero_grad(set_to_none=True)
+                loss, _ = self.objective(hyp, stage, weights)
+                loss.sum().backward()
+                opt.step()
+                if float(self.penetration_mm(hyp.poses()).max()) <= tol_mm:
+                    break
+        except KeyboardInterrupt:  # Ctrl-C keeps the result as it stands
+            log.info("separation interrupted")
         log.info("separated the hands: deepest overlap %.1f mm", float(self.penetration_mm(hyp.poses()).max()))
         return hyp.poses()
 
