@@ -36,3 +36,22 @@ def test_gaps_gradient_closes_the_leak():
     g = shadow.grad[0]
     assert (g[10:20, 15:17] < 0).all()  # raising coverage there lowers the loss
     assert float(g[target == 0].abs().sum()) == 0.0
+
+
+def test_notches_mark_holes_and_narrow_gaps_not_open_ground():
+    import numpy as np
+
+    t = np.zeros((100, 100), bool)
+    t[20:80, 10:30] = True  # two legs 6 px apart (a narrow notch from below) ...
+    t[20:80, 36:56] = True
+    t[20:40, 10:56] = True  # ... joined by a body
+    t[20:80, 70:95] = True
+    t[45:55, 78:87] = False  # a hole in the second shape
+    n = losses.notches(t)
+    assert n.shape == t.shape and float(n[t].max()) == 0.0
+    assert (n[45:55, 78:87] == 1).all()  # the hole
+    assert n[60, 32] > 0  # deep in the narrow gap between the legs
+    t[20:80, 30:33] = True  # narrow the gap to 3 px: it scores higher
+    assert losses.notches(t)[60, 34] > n[60, 34]
+    assert n[60, 62] == 0  # the wide gap between the two shapes
+    assert n[5, 5] == 0 and n[90, 50] == 0  # open ground

@@ -136,7 +136,10 @@ def fit_frame(
     # Prefer one hand unless two are clearly better.
     best = min(results, key=lambda r: (r[2]["key"][0], r[2]["key"][1] - (0.02 if r[0] == 1 else 0.0)))
     n_hands, res, _, searcher, sides = best
-    poses = keep_between_light_and_wall(searcher, searcher.separate(res.poses))
+    poses = searcher.separate(res.poses)
+    if not res.interrupted:
+        poses = searcher.polish(poses)
+    poses = keep_between_light_and_wall(searcher, poses)
     shadow = searcher.shadows(poses)[0].cpu().numpy() > 0.5
     sc = score(shadow, target)
     hand_poses = [
