@@ -193,6 +193,21 @@ def keep_between_light_and_wall(searcher: Searcher, poses: list[HandPoses], marg
 
 def _fit_hands(target, scene, n_hands, config, progress, deadline, extra_starts=None, anchor=None):
     sides = ["right", "left"][:n_hands] if n_hands == 2 else ["right"]
+    searcher = make_searcher(target, scene, sides, config, anchor)
+    limits = searcher.limits
+    n_random, n_keep, stages = schedule(config.quality, config.iters, target.shape[0])
+    starts = initial_hypotheses(
+        searcher, sides, limits, n_random, n_keep, np.random.default_rng(config.seed), extra_starts
+    )
+    res = searcher.run([h for h in starts.hands], stages, progress=progress, deadline_s=deadline)
+    return n_hands, res, res.ranking[0], searcher, sides
+
+
+def make_searcher(
+    target: np.ndarray, scene: Scene, sides: list[str], config: FitConfig, anchor: list[HandPoses] | None = None
+) -> Searcher:
+    """The search context for a target frame (H, W) bool: the config's hand model for each
+    side ('right', 'left'), their joint limits (float32, on the config's device)."""
     dtype = torch.float32
     hands = [
         load_hand(
@@ -207,13 +222,7 @@ def _fit_hands(target, scene, n_hands, config, progress, deadline, extra_starts=
         )
         for s in sides
     ]
-    searcher = Searcher(scene, target, hands, limits, anchor=anchor)
-    n_random, n_keep, stages = schedule(config.quality, config.iters, target.shape[0])
-    starts = initial_hypotheses(
-        searcher, sides, limits, n_random, n_keep, np.random.default_rng(config.seed), extra_starts
-    )
-    res = searcher.run([h for h in starts.hands], stages, progress=progress, deadline_s=deadline)
-    return n_hands, res, res.ranking[0], searcher, sides
+    return Searcher(scene, target, hands, limits, anchor=anchor)
 
 
 def initial_hypotheses(

@@ -1,0 +1,39 @@
+"""The search's last steps: the polish aimed at the success test never hands back worse."""
+
+import torch
+
+from handshadow.fit import FitConfig, make_searcher
+from handshadow.metrics import score
+from handshadow.search import HandPoses, rank_key
+from tests.test_fit import known_target
+
+SIZE = 96
+
+
+def _searcher_and_truth(name="dog"):
+    target, truth = known_target(name, SIZE)
+    searcher = make_searcher(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
+    poses = [HandPoses(*h.tensors()) for h in truth.hands]
+    return searcher, poses
+
+
+def _key(searcher, poses):
+    return rank_key(score(searcher.shadows(poses)[0].numpy() > 0.5, searcher.target))
+
+
+def test_polish_improves_a_failing_pose_and_keeps_a_passing_one():
+    searcher, truth = _searcher_and_truth()
+    assert not _key(searcher, truth)[0]  # the true pose passes the success test
+    assert searcher.polish(truth) is truth  # ... and is left alone
+
+    # Knocked off: the hand slides 3 cm sideways and the fingers curl a little.
+    off = [
+        HandPoses(p.pose_rad * 1.15, p.rotation, p.translation + torch.tensor([0.03, 0.0, 0.0]), p.wrist_rad)
+        for p in truth
+    ]
+    before = _key(searcher, off)
+    assert before[0], "the knocked-off pose should fail the success test"
+    polished = searcher.polish(off, rounds=1, steps=24, copies=2)
+    after = _key(searcher, polished)
+    assert after < before  # strictly better by the ranking
+    assert float(searcher.penetration_mm(polished).max()) <= max(1.0, float(searcher.penetration_mm(off).max()))
