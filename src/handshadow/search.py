@@ -8,6 +8,8 @@ axes on top of a starting rotation; translations are metres.
 Stages run coarse to fine: low resolution with a wide blur and a strong pull toward missing
 target parts first, the exact shadow at full resolution last. After each stage the hypotheses
 are ranked by the fit measures (IoU, thin-part recall, HD95) and only the best continue.
+After the stages, :meth:`Searcher.separate` resolves what penetration is left and
+:meth:`Searcher.polish` aims a few more steps at the success test.
 """
 
 from __future__ import annotations
