@@ -37,3 +37,29 @@ def test_polish_improves_a_failing_pose_and_keeps_a_passing_one():
     after = _key(searcher, polished)
     assert after < before  # strictly better by the ranking
     assert float(searcher.penetration_mm(polished).max()) <= max(1.0, float(searcher.penetration_mm(off).max()))
+
+
+def test_ctrl_c_in_the_polish_hands_back_poses(monkeypatch):
+    import pytest
+
+    from handshadow.search import Interrupted, Searcher
+
+    searcher, truth = _searcher_and_truth()
+    off = [
+        HandPoses(p.pose_rad, p.rotation, p.translation + torch.tensor([0.03, 0.0, 0.0]), p.wrist_rad) for p in truth
+    ]
+    calls = {"n": 0}
+    objective = Searcher.objective
+
+    def interrupted_on_the_third_step(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return objective(self, *args, **kwargs)
+
+    monkeypatch.setattr(Searcher, "objective", interrupted_on_the_third_step)
+    with pytest.raises(Interrupted) as stop:
+        searcher.polish(off, rounds=1, steps=10, copies=2)
+    assert len(stop.value.poses) == 1 and stop.value.poses[0].pose_rad.shape == (1, 15, 3)
+    # What it hands back scores no worse than where it started.
+    assert _key(searcher, stop.value.poses) <= _key(searcher, off)

@@ -19,7 +19,7 @@ from handshadow.hands.limits import joint_limits_deg, wrist_limits_deg
 from handshadow.metrics import FitScore, score
 from handshadow.posefile import HandPose, PoseSet
 from handshadow.scene import Scene
-from handshadow.search import HandPoses, Limits, Progress, Searcher, Stage
+from handshadow.search import HandPoses, Interrupted, Limits, Progress, Searcher, Stage
 from handshadow.starts import (
     Candidates,
     apply_similarity,
@@ -31,6 +31,7 @@ from handshadow.starts import (
 
 log = logging.getLogger(__name__)
 QUALITY = ("fast", "default", "best")
+POLISH_ROUNDS = {"fast": 1, "default": 2, "best": 3}  # at most; only while the result fails the success test
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,9 +137,13 @@ def fit_frame(
     # Prefer one hand unless two are clearly better.
     best = min(results, key=lambda r: (r[2]["key"][0], r[2]["key"][1] - (0.02 if r[0] == 1 else 0.0)))
     n_hands, res, _, searcher, sides = best
-    poses = searcher.separate(res.poses)
-    if not res.interrupted:
-        poses = searcher.polish(poses)
+    finish_interrupted = False
+    try:
+        poses = searcher.separate(res.poses)
+        if not res.interrupted:
+            poses = searcher.polish(poses, rounds=POLISH_ROUNDS[config.quality])
+    except Interrupted as stop:  # Ctrl-C in the finishing steps: keep what they reached
+        poses, finish_interrupted = stop.poses, True
     poses = keep_between_light_and_wall(searcher, poses)
     shadow = searcher.shadows(poses)[0].cpu().numpy() > 0.5
     sc = score(shadow, target)
@@ -164,7 +169,7 @@ def fit_frame(
         "hands": n_hands,
         "limits": config.limits,
         "quality": config.quality,
-        "interrupted": any(r[1].interrupted for r in results),
+        "interrupted": finish_interrupted or any(r[1].interrupted for r in results),
     }
     pose_set = PoseSet(hands=tuple(hand_poses), scene=scene, forearm=config.forearm, fit=info)
     return FitResult(

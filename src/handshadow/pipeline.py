@@ -124,17 +124,16 @@ def progress_frames(
     from skimage.transform import resize
 
     from handshadow.export.images import overlay_image
-    from handshadow.export.pictures import performer_view
+    from handshadow.export.pictures import performer_framing, performer_view
 
     models = [load_hand(h.model, h.side, h.shape, None, forearm=pose_set.forearm) for h in pose_set.hands]
+    with torch.no_grad():
+        vertices = [[m(*p.args()).vertices[0].cpu().double().numpy() for m, p in zip(models, f.poses)] for f in frames]
+    framing = performer_framing([v for vs in vertices for v in vs]) if frames else None  # one camera throughout
     out = []
-    for f in frames:
-        with torch.no_grad():
-            meshes = [
-                (s, m(*p.args()).vertices[0].cpu().double().numpy(), m.faces.cpu().numpy())
-                for s, m, p in zip(sides, models, f.poses)
-            ]
-        view = performer_view(scene, meshes, size=(size, size), supersample=1)
+    for f, vs in zip(frames, vertices):
+        meshes = [(s, v, m.faces.cpu().numpy()) for s, m, v in zip(sides, models, vs)]
+        view = performer_view(scene, meshes, size=(size, size), supersample=1, framing=framing)
         small_target = resize(target.astype(float), f.shadow.shape, order=0) > 0.5
         ov = overlay_image(small_target, f.shadow > 0.5)
         ov = (resize(ov.astype(float) / 255, (size, size * ov.shape[1] // ov.shape[0]), order=0) * 255).astype(np.uint8)
@@ -254,7 +253,7 @@ def interpolate_to_folder(
 
     from handshadow.export.files import write_gif, write_mp4
     from handshadow.export.images import mask_image
-    from handshadow.export.pictures import performer_view
+    from handshadow.export.pictures import performer_framing, performer_view
     from handshadow.export.plots import path_plot
     from handshadow.fit import fit_frame
     from handshadow.interpolate import morph_targets, refine_path, report, straight_path
@@ -277,18 +276,13 @@ def interpolate_to_folder(
     scene = fit_a.pose_set.scene
     sides = [h.side for h in fit_a.pose_set.hands]
     poses_json = path_pose_file(path, sides, fit_a.pose_set, rep)
+    with torch.no_grad():
+        vertices = [hand(*p.args()).vertices.cpu().double().numpy() for hand, p in zip(searcher.hands, path)]
+    framing = performer_framing(vertices)  # one camera for the whole performance
     views, pictures = [], []
     for k in range(frames):
-        with torch.no_grad():
-            meshes = [
-                (
-                    side,
-                    hand(*p.select(slice(k, k + 1)).args()).vertices[0].cpu().double().numpy(),
-                    hand.faces.cpu().numpy(),
-                )
-                for side, hand, p in zip(sides, searcher.hands, path)
-            ]
-        view = performer_view(scene, meshes, size=(config.size, config.size), supersample=1)
+        meshes = [(side, v[k], hand.faces.cpu().numpy()) for side, hand, v in zip(sides, searcher.hands, vertices)]
+        view = performer_view(scene, meshes, size=(config.size, config.size), supersample=1, framing=framing)
         shadow_rgb = np.repeat(mask_image(shadows[k])[..., None], 3, axis=2)
         views.append(view)
         pictures.append(np.concatenate([shadow_rgb, view], 1))

@@ -359,7 +359,7 @@ class Searcher:
         """Resolve what penetration the search left (its penalty is soft so that hands may pass
         through each other on the way): a few small steps of the full-resolution objective
         with a penetration weight 100 times higher, until no proxies overlap by more than tol_mm.
-        Batch-1 poses in and out; Ctrl-C stops it and returns the poses reached."""
+        Batch-1 poses in and out; Ctrl-C raises :class:`Interrupted` with the poses reached."""
         if float(self.penetration_mm(poses).max()) <= tol_mm:
             return poses
         stage = Stage(self.target.shape[0], 0, 0, max_steps, 1, 0.15, 0.0)
@@ -375,7 +375,7 @@ class Searcher:
                 if float(self.penetration_mm(hyp.poses()).max()) <= tol_mm:
                     break
         except KeyboardInterrupt:  # Ctrl-C keeps the result as it stands
-            log.info("separation interrupted")
+            raise Interrupted(hyp.poses()) from None
         log.info("separated the hands: deepest overlap %.1f mm", float(self.penetration_mm(hyp.poses()).max()))
         return hyp.poses()
 
@@ -395,20 +395,20 @@ class Searcher:
         and far spills; the best-scoring pose met on the way wins, and only if it scores better
         than the start and overlaps no more. Rounds repeat from the best while the success test
         is not passed; a start that already passes it is returned as it is unless ``always``.
-        Batch-1 poses in and out; Ctrl-C keeps the best."""
+        Batch-1 poses in and out; Ctrl-C raises :class:`Interrupted` with the best met so far."""
         w = self.weights
         weights = dataclasses.replace(w, gaps=w.gaps * 10, notches=4.0, spill=20.0, penetration=w.penetration * 100)
         start = score(self.shadows(poses)[0].cpu().numpy() > 0.5, self.target)
         allowed = max(tol_mm, float(self.penetration_mm(poses).max()))
         best_key, best = rank_key(start), poses
         gen = torch.Generator(device="cpu").manual_seed(0)
-        for _ in range(rounds):
-            if not best_key[0] and not always:  # passes the success test
-                break
-            try:
+        try:
+            for _ in range(rounds):
+                if not best_key[0] and not always:  # passes the success test
+                    break
                 best_key, best = self._polish_round(best, best_key, weights, steps, copies, check_every, allowed, gen)
-            except _Interrupted as stop:  # Ctrl-C: the best met so far
-                return stop.best
+        except KeyboardInterrupt:  # between steps
+            raise Interrupted(best) from None
         return best
 
     def _polish_round(self, poses, best_key, weights, steps, copies, check_every, allowed_mm, gen):
@@ -438,8 +438,7 @@ class Searcher:
                 loss.sum().backward()
                 opt.step()
         except KeyboardInterrupt:
-            log.info("polish interrupted")
-            raise _Interrupted(best_key, best) from None
+            raise Interrupted(best) from None
         return best_key, best
 
     @torch.no_grad()
@@ -470,12 +469,12 @@ class Searcher:
         return sorted(rows, key=lambda r: r["key"])
 
 
-class _Interrupted(Exception):
-    """Ctrl-C inside a polish round, carrying the best (key, poses) it had met."""
+class Interrupted(Exception):
+    """Ctrl-C during a finishing step (separation, polish), carrying the batch-1 poses to keep."""
 
-    def __init__(self, best_key, best):
-        super().__init__()
-        self.best_key, self.best = best_key, best
+    def __init__(self, poses: list[HandPoses]):
+        super().__init__("interrupted")
+        self.poses = poses
 
 
 def rank_key(s) -> tuple:
