@@ -129,7 +129,7 @@ def progress_frames(
     models = [load_hand(h.model, h.side, h.shape, None, forearm=pose_set.forearm) for h in pose_set.hands]
     with torch.no_grad():
         vertices = [[m(*p.args()).vertices[0].cpu().double().numpy() for m, p in zip(models, f.poses)] for f in frames]
-    framing = performer_framing([v for vs in vertices for v in vs]) if frames else None  # one camera throughout
+    framing = performer_framing([v for vs in vertices for v in vs], scene) if frames else None  # one camera throughout
     out = []
     for f, vs in zip(frames, vertices):
         meshes = [(s, v, m.faces.cpu().numpy()) for s, m, v in zip(sides, models, vs)]
@@ -278,7 +278,7 @@ def interpolate_to_folder(
     poses_json = path_pose_file(path, sides, fit_a.pose_set, rep)
     with torch.no_grad():
         vertices = [hand(*p.args()).vertices.cpu().double().numpy() for hand, p in zip(searcher.hands, path)]
-    framing = performer_framing(vertices)  # one camera for the whole performance
+    framing = performer_framing(vertices, scene)  # one camera for the whole performance
     views, pictures = [], []
     for k in range(frames):
         meshes = [(side, v[k], hand.faces.cpu().numpy()) for side, hand, v in zip(sides, searcher.hands, vertices)]

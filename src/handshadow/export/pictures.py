@@ -67,24 +67,29 @@ def performer_view(
     framing: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
     """The hands as the performer sees them: from just behind and above the lamp, looking at
-    the wall, so left is left and right is right. framing: (centre (3,), extent metres) to
+    the wall, so left is left and right is right. framing: (centre (3,), distance metres) to
     share one camera across the frames of a sequence (:func:`performer_framing`); by default
     these hands' own. Returns (H, W, 3) uint8."""
     meshes = [ViewMesh(v, f, color=HAND_COLORS.get(side, SKIN)) for side, v, f in hands]
-    target, extent = framing if framing is not None else performer_framing([v for _, v, _ in hands])
+    target, distance = framing if framing is not None else performer_framing([v for _, v, _ in hands], scene)
     normal = np.asarray(scene.wall.normal, float)
     up = up_dir(scene)
-    eye = target + normal * max(0.45, 3.2 * extent) + up * 0.25 * max(0.45, 3.2 * extent)
+    eye = target + normal * distance + up * 0.25 * distance
     camera = Camera(tuple(eye), tuple(target), tuple(up), fov_deg=45.0, width=size[0], height=size[1])
     return render_view(meshes, camera, background=(1.0, 1.0, 1.0), supersample=supersample)
 
 
-def performer_framing(vertex_sets: list[np.ndarray]) -> tuple[np.ndarray, float]:
-    """Where the performer's camera looks and how far around: the median of the vertices (V, 3)
-    of all sets, and the 90th percentile of their distances to it (metres)."""
+def performer_framing(vertex_sets: list[np.ndarray], scene: Scene) -> tuple[np.ndarray, float]:
+    """Where the performer's camera looks and from how far (metres): the median of the
+    vertices (V, 3) of all sets, seen from far enough that 90 % of them fit across the view,
+    beyond the depth of what reaches toward the lamp (a forearm pointing at it)."""
     pts = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v in vertex_sets])
     centre = np.median(pts, axis=0)
-    return centre, float(np.percentile(np.linalg.norm(pts - centre, axis=1), 90))
+    normal = np.asarray(scene.wall.normal, float)
+    d = pts - centre
+    depth = d @ normal
+    across = np.linalg.norm(d - np.outer(depth, normal), axis=1)
+    return centre, max(0.45, 3.2 * float(np.percentile(across, 90)) + max(0.0, float(np.percentile(depth, 90))))
 
 
 def up_dir(scene: Scene) -> np.ndarray:
