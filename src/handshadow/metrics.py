@@ -84,6 +84,9 @@ def thin_recall(shadow: np.ndarray, target: np.ndarray, thin: np.ndarray | None 
     return float((np.asarray(shadow, bool) & thin).sum() / thin.sum()) if thin.any() else 1.0
 
 
-def score(shadow: np.ndarray, target: np.ndarray) -> FitScore:
+def score(shadow: np.ndarray, target: np.ndarray, thin: np.ndarray | None = None) -> FitScore:
+    """All four measures; thin: the target's thin parts when already known (thin_parts)."""
     shadow, target = np.asarray(shadow, bool), np.asarray(target, bool)
-    return FitScore(iou(shadow, target), boundary_f1(shadow, target), hd95(shadow, target), thin_recall(shadow, target))
+    return FitScore(
+        iou(shadow, target), boundary_f1(shadow, target), hd95(shadow, target), thin_recall(shadow, target, thin)
+    )

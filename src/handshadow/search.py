@@ -15,6 +15,7 @@ After the stages, :meth:`Searcher.separate` resolves what penetration is left an
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import time
@@ -27,7 +28,7 @@ from handshadow import losses
 from handshadow.hands.kinematics import rotvec_to_rotmat
 from handshadow.hands.model import HandModel
 from handshadow.hands.proxies import PenetrationModel, hand_spheres
-from handshadow.metrics import score
+from handshadow.metrics import score, thin_parts
 from handshadow.render import ShadowRenderer, gaussian_blur
 from handshadow.scene import Scene
 
@@ -244,9 +245,11 @@ class Searcher:
             1.0
             + w.thin * gaussian_blur(maps.thin[None], max(blur, 1.0))[0]
             + w.depth * maps.inside_depth.clamp(max=w.depth_cap)
-            + w.spill * maps.outside_dist.clamp(max=w.depth_cap)
-            + w.notches * gaussian_blur(maps.notches[None], blur)[0]
         )
+        if w.spill:
+            weight = weight + w.spill * maps.outside_dist.clamp(max=w.depth_cap)
+        if w.notches:
+            weight = weight + w.notches * gaussian_blur(maps.notches[None], blur)[0]
         total = w.l2 * losses.weighted_l2(soft, target_soft, weight)
         total = total + w.excess * losses.excess(mask, maps.outside_dist)
         if w.gaps and stage.blur_px <= 1:
@@ -362,7 +365,7 @@ class Searcher:
         Batch-1 poses in and out; Ctrl-C raises :class:`Interrupted` with the poses reached."""
         if float(self.penetration_mm(poses).max()) <= tol_mm:
             return poses
-        stage = Stage(self.target.shape[0], 0, 0, max_steps, 1, 0.15, 0.0)
+        stage = self._finishing_stage(max_steps)
         weights = dataclasses.replace(self.weights, penetration=self.weights.penetration * 100)
         hyp = Hypotheses(poses, self.limits).to(self.device)
         opt = torch.optim.Adam(hyp.param_groups(stage.lr_scale))
@@ -398,7 +401,7 @@ class Searcher:
         Batch-1 poses in and out; Ctrl-C raises :class:`Interrupted` with the best met so far."""
         w = self.weights
         weights = dataclasses.replace(w, gaps=w.gaps * 10, notches=4.0, spill=20.0, penetration=w.penetration * 100)
-        start = score(self.shadows(poses)[0].cpu().numpy() > 0.5, self.target)
+        start = score(self.shadows(poses)[0].cpu().numpy() > 0.5, self.target, self._target_thin)
         allowed = max(tol_mm, float(self.penetration_mm(poses).max()))
         best_key, best = rank_key(start), poses
         gen = torch.Generator(device="cpu").manual_seed(0)
@@ -412,15 +415,16 @@ class Searcher:
         return best
 
     def _polish_round(self, poses, best_key, weights, steps, copies, check_every, allowed_mm, gen):
-        stage = Stage(self.target.shape[0], 0, 0, steps, 1, 0.15, 0.0)
+        stage = self._finishing_stage(steps)
         hyp = Hypotheses([p.select([0] * copies) for p in poses], self.limits).to(self.device)
-        with torch.no_grad():  # jitter every copy but the first
-            for name, p in hyp.named_parameters():
-                sigma = {"logits": 0.15, "rotvec": 0.01, "trans": 0.002}[name.rstrip("0123456789").split("_")[-1]]
-                noise = torch.randn(p.shape, generator=gen).to(p) * sigma
-                noise[0] = 0
-                p.add_(noise)
-        opt = torch.optim.Adam(hyp.param_groups(stage.lr_scale))
+        groups = hyp.param_groups(stage.lr_scale)
+        with torch.no_grad():  # jitter every copy but the first: joint logits, rotation, translation (m)
+            for group, sigma in zip(groups, [0.15, 0.01, 0.002] * hyp.n_hands):
+                for p in group["params"]:
+                    noise = torch.randn(p.shape, generator=gen).to(p) * sigma
+                    noise[0] = 0
+                    p.add_(noise)
+        opt = torch.optim.Adam(groups)
         best = poses
         try:
             for step in range(steps + 1):
@@ -430,7 +434,7 @@ class Searcher:
                     current = hyp.poses()
                     depth = self.penetration_mm(current)
                     for i, m in enumerate(mask.detach().cpu().numpy() > 0.5):
-                        key = rank_key(score(m, self.target))
+                        key = rank_key(score(m, self.target, self._target_thin))
                         if key < best_key and float(depth[i]) <= allowed_mm:
                             best_key, best = key, [p.select(slice(i, i + 1)) for p in current]
                 if step == steps:
@@ -440,6 +444,14 @@ class Searcher:
         except KeyboardInterrupt:
             raise Interrupted(best) from None
         return best_key, best
+
+    def _finishing_stage(self, steps: int) -> Stage:
+        """Small exact-shadow steps at full resolution, without the skeleton guides."""
+        return Stage(self.target.shape[0], 0, 0, steps, 1, 0.15, 0.0)
+
+    @functools.cached_property
+    def _target_thin(self) -> np.ndarray:
+        return thin_parts(self.target)
 
     @torch.no_grad()
     def shadows(self, poses: list[HandPoses], height: int | None = None) -> torch.Tensor:
