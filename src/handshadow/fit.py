@@ -31,7 +31,9 @@ from handshadow.starts import (
 
 log = logging.getLogger(__name__)
 QUALITY = ("fast", "default", "best")
-POLISH_ROUNDS = {"fast": 1, "default": 2, "best": 3}  # at most; only while the result fails the success test
+# Polish rounds, at most and only while the result fails the success test: (rounds, further
+# rounds while it is a near miss and still improving).
+POLISH_ROUNDS = {"fast": (1, 0), "default": (2, 4), "best": (3, 6)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -141,7 +143,8 @@ def fit_frame(
     try:
         poses = searcher.separate(res.poses)
         if not res.interrupted:
-            poses = searcher.polish(poses, rounds=POLISH_ROUNDS[config.quality])
+            rounds, near_rounds = POLISH_ROUNDS[config.quality]
+            poses = searcher.polish(poses, rounds=rounds, near_rounds=near_rounds)
     except Interrupted as stop:  # Ctrl-C in the finishing steps: keep what they reached
         poses, finish_interrupted = stop.poses, True
     poses = keep_between_light_and_wall(searcher, poses)

@@ -21,6 +21,7 @@ SUCCESS_IOU = 0.8
 SUCCESS_THIN = 0.6
 SUCCESS_HD95 = 0.03
 THIN_RADIUS_SHARE = 0.04
+NEAR_MISS_HD95 = 0.01  # how far past the HD95 bar a result still counts as a near miss
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,6 +34,17 @@ class FitScore:
     @property
     def success(self) -> bool:
         return self.iou >= SUCCESS_IOU and self.thin_recall >= SUCCESS_THIN and self.hd95 <= SUCCESS_HD95
+
+    @property
+    def near_miss(self) -> bool:
+        """Fails the success test, but within reach of it: IoU and thin-part recall met and
+        HD95 within 0.01 of its bar (a few fingertips or a notch away)."""
+        return (
+            not self.success
+            and self.iou >= SUCCESS_IOU
+            and self.thin_recall >= SUCCESS_THIN
+            and self.hd95 <= SUCCESS_HD95 + NEAR_MISS_HD95
+        )
 
     def as_dict(self) -> dict:
         return {**dataclasses.asdict(self), "success": self.success}

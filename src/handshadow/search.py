@@ -386,6 +386,7 @@ class Searcher:
         self,
         poses: list[HandPoses],
         rounds: int = 2,
+        near_rounds: int = 0,
         steps: int = 60,
         copies: int = 4,
         check_every: int = 4,
@@ -397,24 +398,32 @@ class Searcher:
         stresses light leaking between fingers, shadow filling the target's holes and notches,
         and far spills; the best-scoring pose met on the way wins, and only if it scores better
         than the start and overlaps no more. Rounds repeat from the best while the success test
-        is not passed; a start that already passes it is returned as it is unless ``always``.
-        Batch-1 poses in and out; Ctrl-C raises :class:`Interrupted` with the best met so far."""
+        is not passed: ``rounds`` of them, then up to ``near_rounds`` more while the result is a
+        near miss (:attr:`FitScore.near_miss`) and the last round improved it. A start that
+        already passes is returned as it is unless ``always``. Batch-1 poses in and out; Ctrl-C
+        raises :class:`Interrupted` with the best met so far."""
         w = self.weights
         weights = dataclasses.replace(w, gaps=w.gaps * 10, notches=4.0, spill=20.0, penetration=w.penetration * 100)
         start = score(self.shadows(poses)[0].cpu().numpy() > 0.5, self.target, self._target_thin)
         allowed = max(tol_mm, float(self.penetration_mm(poses).max()))
-        best_key, best = rank_key(start), poses
+        best_score, best, improved = start, poses, False
         gen = torch.Generator(device="cpu").manual_seed(0)
         try:
-            for _ in range(rounds):
-                if not best_key[0] and not always:  # passes the success test
+            for i in range(rounds + near_rounds):
+                if best_score.success and not always:
                     break
-                best_key, best = self._polish_round(best, best_key, weights, steps, copies, check_every, allowed, gen)
+                if i >= rounds and not (best_score.near_miss and improved):
+                    break
+                previous = best_score
+                best_score, best = self._polish_round(
+                    best, best_score, weights, steps, copies, check_every, allowed, gen
+                )
+                improved = rank_key(best_score) < rank_key(previous)
         except KeyboardInterrupt:  # between steps
             raise Interrupted(best) from None
         return best
 
-    def _polish_round(self, poses, best_key, weights, steps, copies, check_every, allowed_mm, gen):
+    def _polish_round(self, poses, best_score, weights, steps, copies, check_every, allowed_mm, gen):
         stage = self._finishing_stage(steps)
         hyp = Hypotheses([p.select([0] * copies) for p in poses], self.limits).to(self.device)
         groups = hyp.param_groups(stage.lr_scale)
@@ -425,7 +434,7 @@ class Searcher:
                     noise[0] = 0
                     p.add_(noise)
         opt = torch.optim.Adam(groups)
-        best = poses
+        best, best_key = poses, rank_key(best_score)
         try:
             for step in range(steps + 1):
                 opt.zero_grad(set_to_none=True)
@@ -434,16 +443,16 @@ class Searcher:
                     current = hyp.poses()
                     depth = self.penetration_mm(current)
                     for i, m in enumerate(mask.detach().cpu().numpy() > 0.5):
-                        key = rank_key(score(m, self.target, self._target_thin))
-                        if key < best_key and float(depth[i]) <= allowed_mm:
-                            best_key, best = key, [p.select(slice(i, i + 1)) for p in current]
+                        s = score(m, self.target, self._target_thin)
+                        if rank_key(s) < best_key and float(depth[i]) <= allowed_mm:
+                            best_score, best_key, best = s, rank_key(s), [p.select(slice(i, i + 1)) for p in current]
                 if step == steps:
                     break
                 loss.sum().backward()
                 opt.step()
         except KeyboardInterrupt:
             raise Interrupted(best) from None
-        return best_key, best
+        return best_score, best
 
     def _finishing_stage(self, steps: int) -> Stage:
         """Small exact-shadow steps at full resolution, without the skeleton guides."""
