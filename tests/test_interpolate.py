@@ -85,3 +85,14 @@ def test_interpolation_outputs(morph, tmp_path):
         assert np.array_equal(
             iio.imread(out / "shadow.png"), iio.imread(morph / "frames" / f"frame_{k:03d}_shadow.png")
         )
+
+
+def test_missing_mp4_writer_is_refused_before_the_work(tmp_path, monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if imageio-ffmpeg were not installed
+    out = tmp_path / "out"
+    code = main(["interpolate", "dog", "duck", "--quality", "fast", "--quiet", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code != 0 and "imageio-ffmpeg" in err and "Traceback" not in err and len(err.splitlines()) == 1
+    assert not out.exists()

@@ -128,7 +128,9 @@ def progress_frames(
 
     models = [load_hand(h.model, h.side, h.shape, None, forearm=pose_set.forearm) for h in pose_set.hands]
     with torch.no_grad():
-        vertices = [[m(*p.args()).vertices[0].cpu().double().numpy() for m, p in zip(models, f.poses)] for f in frames]
+        vertices = [
+            [m(*p.to("cpu").args()).vertices[0].cpu().double().numpy() for m, p in zip(models, f.poses)] for f in frames
+        ]  # the snapshots' poses live on the fit's device, these models on the CPU
     framing = performer_framing([v for vs in vertices for v in vs], scene) if frames else None  # one camera throughout
     out = []
     for f, vs in zip(frames, vertices):
@@ -251,7 +253,7 @@ def interpolate_to_folder(
     target_b.png. Returns (folder, PathReport)."""
     import sys
 
-    from handshadow.export.files import write_gif, write_mp4
+    from handshadow.export.files import require_mp4, write_gif, write_mp4
     from handshadow.export.images import mask_image
     from handshadow.export.pictures import performer_framing, performer_view
     from handshadow.export.plots import path_plot
@@ -259,6 +261,7 @@ def interpolate_to_folder(
     from handshadow.interpolate import morph_targets, refine_path, report, straight_path
 
     ResultFolder(out, force)
+    require_mp4()
     if frames < 2 or frames > 600:
         raise HandshadowError(f"--frames must be between 2 and 600, got {frames}")
     target_a = resolve_target(source_a, config.size, config.size)

@@ -84,6 +84,9 @@ class HandPoses:
     def select(self, idx) -> HandPoses:
         return HandPoses(self.pose_rad[idx], self.rotation[idx], self.translation[idx], self.wrist_rad[idx])
 
+    def to(self, device) -> HandPoses:
+        return HandPoses(*(t.to(device) for t in self.args()))
+
     def args(self) -> tuple[torch.Tensor, ...]:
         """HandModel.forward's arguments."""
         return self.pose_rad, self.rotation, self.translation, self.wrist_rad

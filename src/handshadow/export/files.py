@@ -83,8 +83,17 @@ def write_gif(path: Path, frames: list[np.ndarray], seconds_per_frame: float = 0
     iio.imwrite(path, np.stack(frames), extension=".gif", duration=durations, loop=0)
 
 
+def require_mp4() -> None:
+    """Raise HandshadowError unless MP4s can be written (call it before long work)."""
+    try:
+        import imageio_ffmpeg  # noqa: F401
+    except ImportError:
+        raise HandshadowError("writing animation.mp4 needs imageio-ffmpeg: pip install imageio-ffmpeg") from None
+
+
 def write_mp4(path: Path, frames: list[np.ndarray], fps: int = 12) -> None:
     """An H.264 MP4 through imageio's ffmpeg plugin (imageio-ffmpeg from PyPI carries ffmpeg)."""
+    require_mp4()
     if not frames:
         return
     h, w = frames[0].shape[:2]
@@ -93,6 +102,7 @@ def write_mp4(path: Path, frames: list[np.ndarray], fps: int = 12) -> None:
         path,
         np.stack([np.pad(f, pad, mode="edge") for f in frames]),
         extension=".mp4",
+        plugin="FFMPEG",
         fps=fps,
         codec="libx264",
         macro_block_size=1,
