@@ -189,6 +189,8 @@ def fit_to_folder(
         if bar is not None:
             bar.n = min(total, p.done)
             bar.set_postfix(iou=f"{p.iou:.3f}")
+            # After a search's last step come the separation, the polish and the export.
+            bar.set_description("finishing" if p.done >= p.total else "fitting")
 
     result = fit_frame(frame, config, progress=on_progress)
     if bar is not None:
