@@ -166,3 +166,20 @@ def test_ctrl_c_writes_the_best_result_so_far(tmp_path):
     assert OUTPUTS | {"left.obj"} <= {p.name for p in out.iterdir()}
     pose = json.loads((out / "pose.json").read_text())
     assert pose["fit"]["interrupted"] is True and len(pose["hands"]) == 2
+
+
+def test_frame_recorder_counts_over_both_searches_of_hands_auto():
+    from types import SimpleNamespace
+
+    from handshadow.pipeline import FrameRecorder
+
+    recorder = FrameRecorder(total_steps=200, searches=2, limit=10)
+    seen = []
+    for n_hands in (1, 2):  # each search counts its own steps from 0
+        for done in range(1, 101):
+            recorder(SimpleNamespace(done=done, total=100, poses=[None] * n_hands))
+            seen.append((recorder.done, recorder.finished))
+    assert [d for d, _ in seen] == list(range(1, 201))
+    assert [f for _, f in seen] == [False] * 199 + [True]  # finished only after the last search
+    per_search = [sum(len(f.poses) == n for f in recorder.frames) for n in (1, 2)]
+    assert min(per_search) >= 5  # both searches are in the GIF's snapshots

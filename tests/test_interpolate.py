@@ -91,6 +91,7 @@ def test_missing_mp4_writer_is_refused_before_the_work(tmp_path, monkeypatch, ca
     import sys
 
     monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if imageio-ffmpeg were not installed
+    monkeypatch.setattr("handshadow.fit.fit_frame", lambda *a, **k: pytest.fail("fitted before refusing"))
     out = tmp_path / "out"
     code = main(["interpolate", "dog", "duck", "--quality", "fast", "--quiet", "--out", str(out)])
     err = capsys.readouterr().err.strip()

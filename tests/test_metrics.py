@@ -39,7 +39,11 @@ def test_hd95_of_a_shifted_shadow_is_the_shift(shift):
 
 
 def test_near_miss_is_a_failure_within_reach():
-    assert FitScore(0.9, 0.6, 0.035, 0.9).near_miss
-    assert not FitScore(0.9, 0.6, 0.045, 0.9).near_miss  # too far from the HD95 bar
-    assert not FitScore(0.9, 0.6, 0.035, 0.4).near_miss  # thin parts missed
-    assert not FitScore(0.9, 0.6, 0.025, 0.9).near_miss  # a success
+    def near(iou, hd95, thin):
+        return FitScore(iou=iou, boundary_f1=0.5, hd95=hd95, thin_recall=thin).near_miss
+
+    assert near(0.9, 0.035, 0.9)
+    assert not near(0.9, 0.045, 0.9)  # too far from the HD95 bar
+    assert not near(0.9, 0.035, 0.4)  # thin parts missed
+    assert not near(0.75, 0.035, 0.9)  # IoU missed
+    assert not near(0.9, 0.025, 0.9)  # a success

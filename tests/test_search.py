@@ -63,3 +63,42 @@ def test_ctrl_c_in_the_polish_hands_back_poses(monkeypatch):
     assert len(stop.value.poses) == 1 and stop.value.poses[0].pose_rad.shape == (1, 15, 3)
     # What it hands back scores no worse than where it started.
     assert _key(searcher, stop.value.poses) <= _key(searcher, off)
+
+
+def _scripted_rounds(monkeypatch, hd95s):
+    """Make each polish round return the next HD95 of ``hd95s`` (IoU 0.9, thin 0.9); count them."""
+    from handshadow.metrics import FitScore
+    from handshadow.search import Searcher
+
+    played = []
+
+    def round_(self, poses, best_score, *args):
+        played.append(hd95s[len(played)])
+        return FitScore(iou=0.9, boundary_f1=0.5, hd95=played[-1], thin_recall=0.9), poses
+
+    monkeypatch.setattr(Searcher, "_polish_round", round_)
+    return played
+
+
+def test_polish_rounds_go_on_only_for_an_improving_near_miss(monkeypatch):
+    searcher, truth = _searcher_and_truth()
+    off = [
+        HandPoses(p.pose_rad, p.rotation, p.translation + torch.tensor([0.03, 0.0, 0.0]), p.wrist_rad) for p in truth
+    ]
+    start = score(searcher.shadows(off)[0].numpy() > 0.5, searcher.target)
+    assert not start.near_miss and not start.success  # far from the bar
+    # A near miss that keeps improving gets every further round.
+    played = _scripted_rounds(monkeypatch, [0.038, 0.036, 0.034, 0.033, 0.032, 0.031, 0.0305])
+    searcher.polish(off, rounds=2, near_rounds=4)
+    assert len(played) == 6
+    # ... but stops when a round brings nothing.
+    played = _scripted_rounds(monkeypatch, [0.038, 0.036, 0.036, 0.036, 0.036, 0.036])
+    searcher.polish(off, rounds=2, near_rounds=4)
+    assert len(played) == 3
+    # A result far from the bar gets only the base rounds; a success ends the polish at once.
+    played = _scripted_rounds(monkeypatch, [0.09, 0.08, 0.07, 0.06])
+    searcher.polish(off, rounds=2, near_rounds=4)
+    assert len(played) == 2
+    played = _scripted_rounds(monkeypatch, [0.036, 0.029, 0.028])
+    searcher.polish(off, rounds=2, near_rounds=4)
+    assert len(played) == 2

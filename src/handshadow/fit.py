@@ -253,7 +253,7 @@ def initial_hypotheses(
             )
         )
     cand = Candidates.cat(parts)
-    cand = Candidates([HandPoses(*(t.to(device) for t in h.args())) for h in cand.hands], cand.origin)
+    cand = Candidates([h.to(device) for h in cand.hands], cand.origin)
     small = 64
     shadows = searcher.shadows(cand.hands, small)
     target_small = searcher.level(small)[2].target

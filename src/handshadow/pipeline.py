@@ -103,17 +103,32 @@ def resolve_target(source: str, width: int, height: int, invert: bool | None = N
 
 
 class FrameRecorder:
-    """Keeps up to ``limit`` snapshots of the search (step, IoU, shadow, poses) for progress.gif."""
+    """Keeps snapshots of the searches (step, IoU, shadow, poses) for progress.gif: about
+    ``limit`` over ``total_steps``, counted over all of a fit's searches (``--hands auto`` runs
+    one per hand count, each counting its steps from 0). ``done`` is that overall count and
+    ``finished`` says whether the last search has taken its last step."""
 
-    def __init__(self, total_steps: int, limit: int = 36):
+    def __init__(self, total_steps: int, searches: int = 1, limit: int = 36):
         self.every = max(1, total_steps // limit)
+        self.searches = searches
         self.frames: list = []
+        self.done = 0
+        self.finished = False
         self._next = 0
+        self._offset = 0
+        self._last = 0
+        self._search = 0
 
     def __call__(self, p) -> None:
-        if p.done >= self._next or p.done == p.total:
+        if p.done < self._last:  # the next search began
+            self._offset += self._last
+            self._search += 1
+        self._last = p.done
+        self.done = self._offset + p.done
+        self.finished = p.done >= p.total and self._search + 1 >= self.searches
+        if self.done >= self._next or p.done == p.total:
             self.frames.append(p)
-            self._next = p.done + self.every
+            self._next = self.done + self.every
 
 
 def progress_frames(
@@ -126,6 +141,7 @@ def progress_frames(
     from handshadow.export.images import overlay_image
     from handshadow.export.pictures import performer_framing, performer_view
 
+    frames = [f for f in frames if len(f.poses) == len(pose_set.hands)]  # not the search with the other hand count
     models = [load_hand(h.model, h.side, h.shape, None, forearm=pose_set.forearm) for h in pose_set.hands]
     with torch.no_grad():
         vertices = [
@@ -174,8 +190,9 @@ def fit_to_folder(
     ResultFolder(out, force)  # refuse an unusable output folder before the work
     frame = resolve_target(target_source, config.size, config.size, invert)
     _, _, stages = schedule(config.quality, config.iters, config.size)
-    total = sum(s.steps for s in stages) * (2 if config.hands == "auto" else 1)
-    recorder = FrameRecorder(total)
+    searches = 2 if config.hands == "auto" else 1  # fit_frame runs one search per hand count
+    total = sum(s.steps for s in stages) * searches
+    recorder = FrameRecorder(total, searches)
     bar = None
     if show_progress and sys.stderr.isatty():
         from tqdm import tqdm
@@ -187,10 +204,10 @@ def fit_to_folder(
         if progress_hook is not None:
             progress_hook(p)
         if bar is not None:
-            bar.n = min(total, p.done)
+            bar.n = min(total, recorder.done)
             bar.set_postfix(iou=f"{p.iou:.3f}")
-            # After a search's last step come the separation, the polish and the export.
-            bar.set_description("finishing" if p.done >= p.total else "fitting")
+            # After the last search's last step come the separation, the polish and the export.
+            bar.set_description("finishing" if recorder.finished else "fitting")
 
     result = fit_frame(frame, config, progress=on_progress)
     if bar is not None:
