@@ -149,8 +149,9 @@ def progress_frames(
         ]  # the snapshots' poses live on the fit's device, these models on the CPU
     framing = performer_framing([v for vs in vertices for v in vs], scene) if frames else None  # one camera throughout
     out = []
+    faces = [m.faces.cpu().numpy() for m in models]
     for f, vs in zip(frames, vertices):
-        meshes = [(s, v, m.faces.cpu().numpy()) for s, m, v in zip(sides, models, vs)]
+        meshes = [(s, v, fs) for s, fs, v in zip(sides, faces, vs)]
         view = performer_view(scene, meshes, size=(size, size), supersample=1, framing=framing)
         small_target = resize(target.astype(float), f.shadow.shape, order=0) > 0.5
         ov = overlay_image(small_target, f.shadow > 0.5)
@@ -300,10 +301,11 @@ def interpolate_to_folder(
     poses_json = path_pose_file(path, sides, fit_a.pose_set, rep)
     with torch.no_grad():
         vertices = [hand(*p.args()).vertices.cpu().double().numpy() for hand, p in zip(searcher.hands, path)]
+    faces = [hand.faces.cpu().numpy() for hand in searcher.hands]
     framing = performer_framing(vertices, scene)  # one camera for the whole performance
     views, pictures = [], []
     for k in range(frames):
-        meshes = [(side, v[k], hand.faces.cpu().numpy()) for side, hand, v in zip(sides, searcher.hands, vertices)]
+        meshes = [(side, v[k], f) for side, f, v in zip(sides, faces, vertices)]
         view = performer_view(scene, meshes, size=(config.size, config.size), supersample=1, framing=framing)
         shadow_rgb = np.repeat(mask_image(shadows[k])[..., None], 3, axis=2)
         views.append(view)

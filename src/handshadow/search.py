@@ -447,8 +447,9 @@ class Searcher:
                     depth = self.penetration_mm(current)
                     for i, m in enumerate(mask.detach().cpu().numpy() > 0.5):
                         s = score(m, self.target, self._target_thin)
-                        if rank_key(s) < best_key and float(depth[i]) <= allowed_mm:
-                            best_score, best_key, best = s, rank_key(s), [p.select(slice(i, i + 1)) for p in current]
+                        key = rank_key(s)
+                        if key < best_key and float(depth[i]) <= allowed_mm:
+                            best_score, best_key, best = s, key, [p.select(slice(i, i + 1)) for p in current]
                 if step == steps:
                     break
                 loss.sum().backward()
