@@ -65,6 +65,44 @@ def test_ctrl_c_in_the_polish_hands_back_poses(monkeypatch):
     assert _key(searcher, stop.value.poses) <= _key(searcher, off)
 
 
+def test_stop_ends_the_polish_at_once_with_the_best_so_far():
+    import pytest
+
+    from handshadow.search import Interrupted
+
+    searcher, truth = _searcher_and_truth()
+    off = [
+        HandPoses(p.pose_rad * 1.15, p.rotation, p.translation + torch.tensor([0.03, 0.0, 0.0]), p.wrist_rad)
+        for p in truth
+    ]
+    asked = []
+
+    def stop():  # the app's Cancel button, pressed during the third step
+        asked.append(1)
+        return len(asked) >= 3
+
+    with pytest.raises(Interrupted) as halt:
+        searcher.polish(off, rounds=1, steps=24, copies=2, stop=stop)
+    assert len(asked) == 3  # asked before every step, obeyed at once
+    assert _key(searcher, halt.value.poses) <= _key(searcher, off)
+
+
+def test_stop_ends_a_fit_early_and_marks_it_interrupted():
+    from handshadow.fit import fit_frame
+
+    target, _ = known_target("dog", SIZE)
+    asked = []
+
+    def stop():
+        asked.append(1)
+        return len(asked) > 5
+
+    result = fit_frame(target, FitConfig(hands="1", size=SIZE, quality="fast"), stop=stop)
+    assert result.interrupted and result.pose_set.fit["interrupted"] is True
+    assert result.steps == 6  # the search obeys on its sixth step; no polish follows
+    assert result.shadow.shape == target.shape and result.shadow.any()
+
+
 def _scripted_rounds(monkeypatch, hd95s):
     """Make each polish round return the next HD95 of ``hd95s`` (IoU 0.9, thin 0.9); count them."""
     from handshadow.metrics import FitScore

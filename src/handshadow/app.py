@@ -67,11 +67,6 @@ class SessionStore:
         shutil.rmtree(self.root, ignore_errors=True)
 
 
-class Cancelled(KeyboardInterrupt):
-    """Raised inside the search when the page's Cancel button is pressed: the search keeps
-    its best result so far, exactly as for Ctrl-C."""
-
-
 def _save_target(image, folder: Path) -> Path:
     """Write an uploaded or drawn image (numpy RGB/RGBA) as the job's target.png source."""
     import imageio.v3 as iio
@@ -159,14 +154,17 @@ def build_app(store: SessionStore | None = None):
 
         def on_progress(p):
             updates.put(p)
-            if session.cancel.is_set():
-                raise Cancelled
 
         def work():
             try:
                 config = FitConfig(hands=hands, quality=quality, limits=limits, light=light, device=_device())
                 outcome["result"] = fit_to_folder(
-                    target, job / "result", config, show_progress=False, progress_hook=on_progress
+                    target,
+                    job / "result",
+                    config,
+                    show_progress=False,
+                    progress_hook=on_progress,
+                    stop=session.cancel.is_set,  # Cancel: the best result so far, as Ctrl-C
                 )
             except Exception as exc:  # shown in the page
                 outcome["error"] = exc
@@ -192,7 +190,7 @@ def build_app(store: SessionStore | None = None):
         s = result.score
         status = (
             ("Cancelled: best result so far. " if result.interrupted else "")
-            + f"IoU {s.iou:.3f}, thin parts {s.thin_recall:.2f}, HD95 {s.hd95:.3f}"
+            + str(s)
             + (" (a success)" if s.success else "")
             + "\n\n"
             + "\n".join(line.strip() for line in lines)

@@ -115,12 +115,15 @@ def fit_frame(
     progress: Callable[[Progress], None] | None = None,
     extra_starts: list[HandPoses] | None = None,
     anchor: list[HandPoses] | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> FitResult:
     """Fit one or two hands to a binary target frame (H, W).
 
     extra_starts: hypotheses (per hand slot, right first) always tried, as given and aligned
     to the target; anchor: batch-1 poses the solution should stay close to (a morph's other
-    end). Both fix the number of hands to theirs."""
+    end). Both fix the number of hands to theirs. stop: checked at every step of the search
+    and of the finishing steps; True stops the fit as Ctrl-C does (the best result so far,
+    marked interrupted). config.time_limit_s bounds the whole fit, finishing steps included."""
     t0 = time.perf_counter()
     torch.manual_seed(config.seed)
     height, width = target.shape
@@ -133,20 +136,29 @@ def fit_frame(
     results = []
     deadline = config.time_limit_s / len(options) if config.time_limit_s else None
     for option in options:
-        results.append(_fit_hands(target, scene, int(option), config, progress, deadline, extra_starts, anchor))
+        results.append(_fit_hands(target, scene, int(option), config, progress, deadline, extra_starts, anchor, stop))
         if results[-1][1].interrupted:
             break
     # Prefer one hand unless two are clearly better.
     best = min(results, key=lambda r: (r[2]["key"][0], r[2]["key"][1] - (0.02 if r[0] == 1 else 0.0)))
     n_hands, res, _, searcher, sides = best
     finish_interrupted = False
-    try:
-        poses = searcher.separate(res.poses)
+
+    def time_up() -> bool:
+        return config.time_limit_s is not None and time.perf_counter() - t0 > config.time_limit_s
+
+    try:  # the separation runs to its end unless stopped by hand: a result must not penetrate
+        poses = searcher.separate(res.poses, stop=stop)
         if not res.interrupted:
             rounds, near_rounds = POLISH_ROUNDS[config.quality]
-            poses = searcher.polish(poses, rounds=rounds, near_rounds=near_rounds)
-    except Interrupted as stop:  # Ctrl-C in the finishing steps: keep what they reached
-        poses, finish_interrupted = stop.poses, True
+            poses = searcher.polish(
+                poses, rounds=rounds, near_rounds=near_rounds, stop=lambda: (stop is not None and stop()) or time_up()
+            )
+    except Interrupted as halt:  # Ctrl-C, stop or the time limit in the finishing steps: keep what they reached
+        poses = halt.poses
+        finish_interrupted = not time_up() or (stop is not None and stop())
+        if not finish_interrupted:
+            log.info("the polish stopped at the time limit")
     poses = keep_between_light_and_wall(searcher, poses)
     shadow = searcher.shadows(poses)[0].cpu().numpy() > 0.5
     sc = score(shadow, target)
@@ -199,7 +211,7 @@ def keep_between_light_and_wall(searcher: Searcher, poses: list[HandPoses], marg
     return [HandPoses(p.pose_rad, p.rotation, p.translation + shift * n, p.wrist_rad) for p in poses]
 
 
-def _fit_hands(target, scene, n_hands, config, progress, deadline, extra_starts=None, anchor=None):
+def _fit_hands(target, scene, n_hands, config, progress, deadline, extra_starts=None, anchor=None, stop=None):
     sides = ["right", "left"][:n_hands] if n_hands == 2 else ["right"]
     searcher = make_searcher(target, scene, sides, config, anchor)
     limits = searcher.limits
@@ -207,7 +219,7 @@ def _fit_hands(target, scene, n_hands, config, progress, deadline, extra_starts=
     starts = initial_hypotheses(
         searcher, sides, limits, n_random, n_keep, np.random.default_rng(config.seed), extra_starts
     )
-    res = searcher.run([h for h in starts.hands], stages, progress=progress, deadline_s=deadline)
+    res = searcher.run([h for h in starts.hands], stages, progress=progress, deadline_s=deadline, stop=stop)
     return n_hands, res, res.ranking[0], searcher, sides
 
 

@@ -306,9 +306,11 @@ class Searcher:
         progress: Callable[[Progress], None] | None = None,
         every: int = 10,
         deadline_s: float | None = None,
+        stop: Callable[[], bool] | None = None,
     ) -> SearchResult:
-        """Optimise the starting hypotheses through the stages; Ctrl-C (KeyboardInterrupt) or
-        the deadline stops early and keeps the best so far."""
+        """Optimise the starting hypotheses through the stages; Ctrl-C (KeyboardInterrupt),
+        ``stop`` returning True (checked every step) or the deadline stops early and keeps the
+        best so far."""
         t0 = time.perf_counter()
         total_steps = sum(s.steps for s in stages)
         done, interrupted = 0, False
@@ -341,6 +343,8 @@ class Searcher:
                         )
                     if deadline_s is not None and time.perf_counter() - t0 > deadline_s:
                         raise TimeoutError
+                    if stop is not None and stop():
+                        raise KeyboardInterrupt
                 keep = min(stage.keep, hyp.batch)
                 best_idx = self.rank(hyp, stage)[:keep]
                 hyp = Hypotheses([p.select(best_idx) for p in hyp.poses()], self.limits).to(self.device)
@@ -361,11 +365,18 @@ class Searcher:
         centres = self.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
         return self.penetration.depths(centres).amax(1) * 1000
 
-    def separate(self, poses: list[HandPoses], tol_mm: float = 1.0, max_steps: int = 150) -> list[HandPoses]:
+    def separate(
+        self,
+        poses: list[HandPoses],
+        tol_mm: float = 1.0,
+        max_steps: int = 150,
+        stop: Callable[[], bool] | None = None,
+    ) -> list[HandPoses]:
         """Resolve what penetration the search left (its penalty is soft so that hands may pass
         through each other on the way): a few small steps of the full-resolution objective
         with a penetration weight 100 times higher, until no proxies overlap by more than tol_mm.
-        Batch-1 poses in and out; Ctrl-C raises :class:`Interrupted` with the poses reached."""
+        Batch-1 poses in and out; Ctrl-C, or ``stop`` returning True, raises
+        :class:`Interrupted` with the poses reached."""
         if float(self.penetration_mm(poses).max()) <= tol_mm:
             return poses
         stage = self._finishing_stage(max_steps)
@@ -374,6 +385,8 @@ class Searcher:
         opt = torch.optim.Adam(hyp.param_groups(stage.lr_scale))
         try:
             for _ in range(max_steps):
+                if stop is not None and stop():
+                    raise KeyboardInterrupt
                 opt.zero_grad(set_to_none=True)
                 loss, _ = self.objective(hyp, stage, weights)
                 loss.sum().backward()
@@ -395,6 +408,7 @@ class Searcher:
         check_every: int = 4,
         tol_mm: float = 1.0,
         always: bool = False,
+        stop: Callable[[], bool] | None = None,
     ) -> list[HandPoses]:
         """Aim the last steps at what the success test sees: a few copies of the result (the
         first as it is, the others slightly jittered) take small steps of an objective that
@@ -403,8 +417,9 @@ class Searcher:
         than the start and overlaps no more. Rounds repeat from the best while the success test
         is not passed: ``rounds`` of them, then up to ``near_rounds`` more while the result is a
         near miss (:attr:`FitScore.near_miss`) and the last round improved it. A start that
-        already passes is returned as it is unless ``always``. Batch-1 poses in and out; Ctrl-C
-        raises :class:`Interrupted` with the best met so far."""
+        already passes is returned as it is unless ``always``. Batch-1 poses in and out; Ctrl-C,
+        or ``stop`` returning True (checked every step), raises :class:`Interrupted` with the
+        best met so far."""
         w = self.weights
         weights = dataclasses.replace(w, gaps=w.gaps * 10, notches=4.0, spill=20.0, penetration=w.penetration * 100)
         start = score(self.shadows(poses)[0].cpu().numpy() > 0.5, self.target, self._target_thin)
@@ -419,14 +434,14 @@ class Searcher:
                     break
                 previous = best_score
                 best_score, best = self._polish_round(
-                    best, best_score, weights, steps, copies, check_every, allowed, gen
+                    best, best_score, weights, steps, copies, check_every, allowed, gen, stop
                 )
                 improved = rank_key(best_score) < rank_key(previous)
         except KeyboardInterrupt:  # between steps
             raise Interrupted(best) from None
         return best
 
-    def _polish_round(self, poses, best_score, weights, steps, copies, check_every, allowed_mm, gen):
+    def _polish_round(self, poses, best_score, weights, steps, copies, check_every, allowed_mm, gen, stop=None):
         stage = self._finishing_stage(steps)
         hyp = Hypotheses([p.select([0] * copies) for p in poses], self.limits).to(self.device)
         groups = hyp.param_groups(stage.lr_scale)
@@ -452,6 +467,8 @@ class Searcher:
                             best_score, best_key, best = s, key, [p.select(slice(i, i + 1)) for p in current]
                 if step == steps:
                     break
+                if stop is not None and stop():
+                    raise KeyboardInterrupt
                 loss.sum().backward()
                 opt.step()
         except KeyboardInterrupt:
