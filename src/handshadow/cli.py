@@ -72,9 +72,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     s = result.score
     if not args.quiet:
         state = "interrupted; best so far" if result.interrupted else ("success" if s.success else "done")
-        print(
-            f"{state}: IoU {s.iou:.3f}, thin parts {s.thin_recall:.2f}, HD95 {s.hd95:.3f}, {result.steps} steps, {result.seconds:.0f} s"
-        )
+        print(f"{state}: {s}, {result.steps} steps, {result.seconds:.0f} s")
         for line in lines:
             print(line)
         print(f"results in {folder}/ (guide.png shows how to hold your hands)")

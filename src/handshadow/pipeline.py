@@ -172,12 +172,14 @@ def fit_to_folder(
     invert: bool | None = None,
     show_progress: bool = True,
     progress_hook=None,
+    stop=None,
 ):
     """Fit hands to a target and write the result folder: target.png, shadow.png, overlay.png,
     scene.json, pose.json, <side>.obj, hands.glb, scene.png, progress.gif, guide.png.
 
-    Ctrl-C during the search (or a KeyboardInterrupt raised by ``progress_hook``, called with
-    each search.Progress) stops it and writes the best result so far, completely.
+    ``progress_hook`` is called with each search.Progress. Ctrl-C, or ``stop`` (a callable
+    checked at every step) returning True, ends the fit early and writes the best result so
+    far, completely.
     Returns (folder, FitResult, instruction lines)."""
     import sys
 
@@ -210,7 +212,7 @@ def fit_to_folder(
             # After the last search's last step come the separation, the polish and the export.
             bar.set_description("finishing" if recorder.finished else "fitting")
 
-    result = fit_frame(frame, config, progress=on_progress)
+    result = fit_frame(frame, config, progress=on_progress, stop=stop)
     if bar is not None:
         bar.close()
     from handshadow.search import Progress
@@ -289,9 +291,9 @@ def interpolate_to_folder(
     say = (lambda msg: print(msg, file=sys.stderr, flush=True)) if show_progress else (lambda msg: None)
     say("fitting A ...")
     fit_a = fit_frame(target_a, config)
-    say(f"fitting A: IoU {fit_a.score.iou:.3f}; fitting B close to A ...")
+    say(f"fitting A: {_judged(fit_a.score)}; fitting B close to A ...")
     fit_b = fit_frame(target_b, config, extra_starts=fit_a.poses, anchor=fit_a.poses)
-    say(f"fitting B: IoU {fit_b.score.iou:.3f}; refining the path ...")
+    say(f"fitting B: {_judged(fit_b.score)}; refining the path ...")
     searcher = fit_a.searcher
     path = straight_path(fit_a.poses, fit_b.poses, frames)
     path = refine_path(searcher, path, morph_targets(target_a, target_b, frames), steps=path_steps)
@@ -323,6 +325,12 @@ def interpolate_to_folder(
         write_png(folder / "path.png", path_plot(rep))
         result = folder.commit()
     return result, rep
+
+
+def _judged(s) -> str:
+    """A fit's measures in words, and whether it passes the success test."""
+    verdict = "a success" if s.success else "short of the success test"
+    return f"{s} ({verdict})"
 
 
 def path_pose_file(path, sides, template: PoseSet, rep) -> dict:
