@@ -66,6 +66,9 @@ def test_interpolation_meets_the_bounds(morph, capsys):
     poses = json.loads((morph / "poses.json").read_text())
     summary = dict(re.findall(r"(\w+)=([\d.]+)", poses["summary"]))
     assert float(summary["iou_start"]) >= 0.9 and float(summary["iou_end"]) >= 0.9
+    # Both ends pass the success test of the metrics note (thin parts, HD95) as well.
+    assert float(summary["thin_start"]) >= 0.6 and float(summary["thin_end"]) >= 0.6
+    assert float(summary["hd95_start"]) <= 0.03 and float(summary["hd95_end"]) <= 0.03
     assert float(summary["max_step_deg"]) <= 10.0
     assert int(summary["penetrating_frames"]) == 0
 
