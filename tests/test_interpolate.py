@@ -100,3 +100,40 @@ def test_missing_mp4_writer_is_refused_before_the_work(tmp_path, monkeypatch, ca
     err = capsys.readouterr().err.strip()
     assert code != 0 and "imageio-ffmpeg" in err and "Traceback" not in err and len(err.splitlines()) == 1
     assert not out.exists()
+
+
+def test_ctrl_c_while_fitting_an_end_writes_nothing(morph, tmp_path, monkeypatch, capsys):
+    import handshadow.fit
+
+    real = handshadow.fit.fit_frame
+    # Ctrl-C during the first search: the fit hands back its best so far, marked interrupted.
+    monkeypatch.setattr("handshadow.fit.fit_frame", lambda *a, **k: real(*a, **k, stop=lambda: True))
+    out = tmp_path / "out"
+    options = "--frames 6 --hands 1 --size 64 --quality fast --quiet --device cpu --out".split()
+    code = main(["interpolate", str(morph.parent / "dog.png"), str(morph.parent / "duck.png")] + options + [str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 130 and err == "handshadow: interrupted"
+    assert not out.exists()  # a morph needs both ends: nothing half-done is left
+
+
+def test_ctrl_c_while_refining_keeps_the_path_so_far(morph, tmp_path, monkeypatch, capsys):
+    import handshadow.interpolate
+
+    real, calls = handshadow.interpolate.rotmat_to_rotvec, []
+
+    def ctrl_c_on_the_third_step(*args):  # called once per hand and step of the refinement only
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args)
+
+    monkeypatch.setattr("handshadow.interpolate.rotmat_to_rotvec", ctrl_c_on_the_third_step)
+    out = tmp_path / "out"
+    options = "--frames 6 --hands 1 --size 64 --quality fast --device cpu --out".split()
+    code = main(["interpolate", str(morph.parent / "dog.png"), str(morph.parent / "duck.png")] + options + [str(out)])
+    printed = capsys.readouterr().out
+    assert code == 130 and "interrupted: the path as refined so far" in printed
+    assert printed.strip().splitlines()[-1].startswith("SUMMARY ")
+    poses = json.loads((out / "poses.json").read_text())
+    assert poses["interrupted"] is True and len(poses["frames"]) == 6
+    assert len(list((out / "frames").glob("frame_*_shadow.png"))) == 6 and (out / "animation.mp4").exists()

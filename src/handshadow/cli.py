@@ -122,9 +122,11 @@ def cmd_interpolate(args: argparse.Namespace) -> int:
         args.a, args.b, out, config, frames=args.frames, force=args.force, show_progress=not args.quiet
     )
     if not args.quiet:
+        if report.interrupted:
+            print("interrupted: the path as refined so far")
         print(f"results in {folder}/ (animation.mp4, animation.gif, poses.json, path.png, frames/)")
     print(report.summary())
-    return 0
+    return EXIT_INTERRUPTED if report.interrupted else 0
 
 
 def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", quality_default: str = "default") -> None:

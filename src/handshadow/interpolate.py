@@ -20,7 +20,7 @@ from handshadow import losses
 from handshadow.hands.kinematics import rotation_angle_deg, rotmat_to_rotvec, slerp_rotations
 from handshadow.metrics import score
 from handshadow.render import gaussian_blur
-from handshadow.search import HandPoses, Hypotheses, Searcher, Stage
+from handshadow.search import HandPoses, Hypotheses, Interrupted, Searcher, Stage
 
 STEP_LIMIT_DEG = 8.0  # the hinge starts here, under the 10-degree bar
 PENETRATION_MM = 2.0  # a frame whose proxies overlap deeper than this counts as penetrating
@@ -83,7 +83,8 @@ def refine_path(
     weights: PathWeights = PathWeights(),
     height: int = 96,
 ) -> list[HandPoses]:
-    """Optimise the in-between frames of a path (the first and last stay fixed)."""
+    """Optimise the in-between frames of a path (the first and last stay fixed). Ctrl-C raises
+    :class:`Interrupted` with the path as refined so far."""
     frames = path[0].pose_rad.shape[0]
     if frames <= 2:
         return path
@@ -108,42 +109,45 @@ def refine_path(
     from handshadow.render.shadow import shadow_mask
 
     lo, hi = searcher.height_range
-    for _ in range(steps):
-        opt.zero_grad(set_to_none=True)
-        outs, globals_, cur = [], [], []
-        for i, hand in enumerate(searcher.hands):
-            pose, rot, trans, wrist = hyp.hand(i)
-            outs.append(hand(pose, rot, trans, wrist))
-            globals_.append((rot, trans))
-            cur.append((pose, rot, trans, wrist))
-        xy, h = renderer.project([o.vertices for o in outs])
-        mask = shadow_mask(xy, renderer.topology, scene.image.height, scene.image.width)
-        blur = stage.blur_px * height / searcher.target.shape[0]
-        sil = ((gaussian_blur(mask, blur) - gaussian_blur(morph_small, blur)) ** 2).mean((1, 2))
-        centres = searcher.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
-        pen = losses.penetration(searcher.penetration.depths(centres, searcher.light_position))
-        place = losses.placement(h, lo, hi)
-        smooth = accel = hinge = 0
-        for pose, rot, trans, wrist in cur:
-            d_pose = pose[1:] - pose[:-1]
-            d_wrist = wrist[1:] - wrist[:-1]
-            d_rot = rotmat_to_rotvec(rot[:-1].transpose(-1, -2) @ rot[1:])
-            d_trans = (trans[1:] - trans[:-1]) / 0.02  # 2 cm weigh like a radian
-            smooth = smooth + sum((d**2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_rot, d_trans))
-            accel = accel + sum(((d[1:] - d[:-1]) ** 2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_trans))
-            biggest = torch.cat([d_pose.abs().flatten(1), d_wrist.abs(), d_rot.norm(dim=1, keepdim=True)], 1)
-            hinge = hinge + (torch.relu(biggest - np.radians(STEP_LIMIT_DEG)) ** 2).sum()
-        loss = (
-            weights.smooth * smooth
-            + weights.accel * accel
-            + weights.step_hinge * hinge
-            + ((weights.penetration * pen + weights.placement * place + weights.morph * sil) * free).sum()
-        )
-        loss.backward()
-        for p in hyp.parameters():
-            if p.grad is not None:
-                p.grad *= free.view(-1, *([1] * (p.dim() - 1)))
-        opt.step()
+    try:
+        for _ in range(steps):
+            opt.zero_grad(set_to_none=True)
+            outs, globals_, cur = [], [], []
+            for i, hand in enumerate(searcher.hands):
+                pose, rot, trans, wrist = hyp.hand(i)
+                outs.append(hand(pose, rot, trans, wrist))
+                globals_.append((rot, trans))
+                cur.append((pose, rot, trans, wrist))
+            xy, h = renderer.project([o.vertices for o in outs])
+            mask = shadow_mask(xy, renderer.topology, scene.image.height, scene.image.width)
+            blur = stage.blur_px * height / searcher.target.shape[0]
+            sil = ((gaussian_blur(mask, blur) - gaussian_blur(morph_small, blur)) ** 2).mean((1, 2))
+            centres = searcher.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
+            pen = losses.penetration(searcher.penetration.depths(centres, searcher.light_position))
+            place = losses.placement(h, lo, hi)
+            smooth = accel = hinge = 0
+            for pose, rot, trans, wrist in cur:
+                d_pose = pose[1:] - pose[:-1]
+                d_wrist = wrist[1:] - wrist[:-1]
+                d_rot = rotmat_to_rotvec(rot[:-1].transpose(-1, -2) @ rot[1:])
+                d_trans = (trans[1:] - trans[:-1]) / 0.02  # 2 cm weigh like a radian
+                smooth = smooth + sum((d**2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_rot, d_trans))
+                accel = accel + sum(((d[1:] - d[:-1]) ** 2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_trans))
+                biggest = torch.cat([d_pose.abs().flatten(1), d_wrist.abs(), d_rot.norm(dim=1, keepdim=True)], 1)
+                hinge = hinge + (torch.relu(biggest - np.radians(STEP_LIMIT_DEG)) ** 2).sum()
+            loss = (
+                weights.smooth * smooth
+                + weights.accel * accel
+                + weights.step_hinge * hinge
+                + ((weights.penetration * pen + weights.placement * place + weights.morph * sil) * free).sum()
+            )
+            loss.backward()
+            for p in hyp.parameters():
+                if p.grad is not None:
+                    p.grad *= free.view(-1, *([1] * (p.dim() - 1)))
+            opt.step()
+    except KeyboardInterrupt:  # the path as refined so far (still within the joint limits)
+        raise Interrupted(hyp.poses()) from None
     return hyp.poses()
 
 
@@ -161,6 +165,7 @@ class PathReport:
     iou_b: list[float]
     steps_deg: list[float]
     penetration_mm: list[float]
+    interrupted: bool = False  # Ctrl-C during the path refinement: the path as refined so far
 
     def summary(self) -> str:
         return (

@@ -272,7 +272,10 @@ def interpolate_to_folder(
 ):
     """Morph target A into target B: fit both ends (B close to A), blend and refine the path,
     and write frames/, animation.gif, animation.mp4, poses.json, path.png, target_a.png,
-    target_b.png. Returns (folder, PathReport)."""
+    target_b.png. Returns (folder, PathReport).
+
+    Ctrl-C while fitting an end stops the whole morph (KeyboardInterrupt, nothing written);
+    Ctrl-C while refining the path writes the path as refined so far (report.interrupted)."""
     import sys
 
     from handshadow.export.files import require_mp4, write_gif, write_mp4
@@ -281,6 +284,7 @@ def interpolate_to_folder(
     from handshadow.export.plots import path_plot
     from handshadow.fit import fit_frame
     from handshadow.interpolate import morph_targets, refine_path, report, straight_path
+    from handshadow.search import Interrupted
 
     ResultFolder(out, force)
     require_mp4()
@@ -291,13 +295,22 @@ def interpolate_to_folder(
     say = (lambda msg: print(msg, file=sys.stderr, flush=True)) if show_progress else (lambda msg: None)
     say("fitting A ...")
     fit_a = fit_frame(target_a, config)
+    if fit_a.interrupted:  # Ctrl-C in a fit: a morph needs both ends, so nothing is written
+        raise KeyboardInterrupt
     say(f"fitting A: {_judged(fit_a.score)}; fitting B close to A ...")
     fit_b = fit_frame(target_b, config, extra_starts=fit_a.poses, anchor=fit_a.poses)
-    say(f"fitting B: {_judged(fit_b.score)}; refining the path ...")
+    if fit_b.interrupted:
+        raise KeyboardInterrupt
+    say(f"fitting B: {_judged(fit_b.score)}; refining the path (Ctrl-C keeps the path so far) ...")
     searcher = fit_a.searcher
     path = straight_path(fit_a.poses, fit_b.poses, frames)
-    path = refine_path(searcher, path, morph_targets(target_a, target_b, frames), steps=path_steps)
+    interrupted = False
+    try:
+        path = refine_path(searcher, path, morph_targets(target_a, target_b, frames), steps=path_steps)
+    except Interrupted as halt:
+        path, interrupted = halt.poses, True
     rep, shadows = report(searcher, path, target_a, target_b)
+    rep.interrupted = interrupted
     scene = fit_a.pose_set.scene
     sides = [h.side for h in fit_a.pose_set.hands]
     poses_json = path_pose_file(path, sides, fit_a.pose_set, rep)
@@ -360,4 +373,5 @@ def path_pose_file(path, sides, template: PoseSet, rep) -> dict:
         "forearm": template.forearm,
         "frames": frames,
         "summary": rep.summary(),
+        "interrupted": rep.interrupted,
     }
