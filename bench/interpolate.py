@@ -29,7 +29,7 @@ END_IOU, MAX_STEP_DEG, MAX_SECONDS = 0.85, 10.0, 600.0
 
 def missed_bars(rep, seconds: float) -> list[str]:
     """The names of the bars a run misses (empty: all met)."""
-    missed = []
+    missed = ["interrupted"] if rep.interrupted else []
     for end, iou, thin, hd in (
         ("start", rep.iou_start, rep.thin_start, rep.hd95_start),
         ("end", rep.iou_end, rep.thin_end, rep.hd95_end),
@@ -97,6 +97,9 @@ def main() -> None:
             flush=True,
         )
         print(f"  {rep.summary()}", flush=True)
+        if rep.interrupted:  # Ctrl-C during the path refinement: this row is partial, stop here
+            print("interrupted: the row above is the path as refined so far")
+            break
     print(f"SUMMARY pairs={len(pairs)} bars_met={met} median_s={statistics.median(seconds):.1f}")
 
 

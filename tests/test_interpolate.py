@@ -105,15 +105,21 @@ def test_missing_mp4_writer_is_refused_before_the_work(tmp_path, monkeypatch, ca
 def test_ctrl_c_while_fitting_an_end_writes_nothing(morph, tmp_path, monkeypatch, capsys):
     import handshadow.fit
 
-    real = handshadow.fit.fit_frame
-    # Ctrl-C during the first search: the fit hands back its best so far, marked interrupted.
-    monkeypatch.setattr("handshadow.fit.fit_frame", lambda *a, **k: real(*a, **k, stop=lambda: True))
+    real, fits = handshadow.fit.fit_frame, []
+
+    def first_fit_interrupted(*args, **kwargs):
+        # Ctrl-C during the first search only: that fit hands back its best so far, marked interrupted.
+        fits.append(1)
+        return real(*args, **kwargs, stop=(lambda: True) if len(fits) == 1 else None)
+
+    monkeypatch.setattr("handshadow.fit.fit_frame", first_fit_interrupted)
     out = tmp_path / "out"
     options = "--frames 6 --hands 1 --size 64 --quality fast --quiet --device cpu --out".split()
     code = main(["interpolate", str(morph.parent / "dog.png"), str(morph.parent / "duck.png")] + options + [str(out)])
     err = capsys.readouterr().err.strip()
     assert code == 130 and err == "handshadow: interrupted"
     assert not out.exists()  # a morph needs both ends: nothing half-done is left
+    assert len(fits) == 1  # and B is not fitted after A was interrupted
 
 
 def test_ctrl_c_while_refining_keeps_the_path_so_far(morph, tmp_path, monkeypatch, capsys):

@@ -84,23 +84,43 @@ def test_stop_ends_the_polish_at_once_with_the_best_so_far():
     with pytest.raises(Interrupted) as halt:
         searcher.polish(off, rounds=1, steps=24, copies=2, stop=stop)
     assert len(asked) == 3  # asked before every step, obeyed at once
-    assert _key(searcher, halt.value.poses) <= _key(searcher, off)
+    assert [p.pose_rad.shape for p in halt.value.poses] == [(1, 15, 3)] * len(off)
 
 
-def test_stop_ends_a_fit_early_and_marks_it_interrupted():
+def test_stop_ends_a_fit_early_and_marks_it_interrupted(monkeypatch):
     from handshadow.fit import fit_frame
+    from handshadow.search import Searcher
 
     target, _ = known_target("dog", SIZE)
-    asked = []
+    asked, finishing = [], []
 
     def stop():
         asked.append(1)
         return len(asked) > 5
 
+    separate, polish = Searcher.separate, Searcher.polish
+    monkeypatch.setattr(
+        Searcher, "separate", lambda self, p, **k: finishing.append(("separate", k)) or separate(self, p, **k)
+    )
+    monkeypatch.setattr(
+        Searcher, "polish", lambda self, p, **k: finishing.append(("polish", k)) or polish(self, p, **k)
+    )
     result = fit_frame(target, FitConfig(hands="1", size=SIZE, quality="fast"), stop=stop)
     assert result.interrupted and result.pose_set.fit["interrupted"] is True
-    assert result.steps == 6  # the search obeys on its sixth step; no polish follows
+    assert result.steps == 6  # the search obeys on its sixth step
     assert result.shadow.shape == target.shape and result.shadow.any()
+    # After a stopped search the separation still runs to its end (a result must not
+    # penetrate, although the stop stays pressed) and no polish follows.
+    assert finishing == [("separate", {"stop": None})]
+
+
+def test_time_limit_ends_search_and_polish_without_marking_an_interruption():
+    from handshadow.fit import fit_frame
+
+    target, _ = known_target("dog", SIZE)
+    result = fit_frame(target, FitConfig(hands="1", size=SIZE, quality="fast", time_limit_s=1e-6))
+    assert result.steps == 1 and not result.interrupted  # the deadline is checked after each step
+    assert result.shadow.any()
 
 
 def _scripted_rounds(monkeypatch, hd95s):

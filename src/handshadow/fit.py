@@ -123,7 +123,9 @@ def fit_frame(
     to the target; anchor: batch-1 poses the solution should stay close to (a morph's other
     end). Both fix the number of hands to theirs. stop: checked at every step of the search
     and of the finishing steps; True stops the fit as Ctrl-C does (the best result so far,
-    marked interrupted). config.time_limit_s bounds the whole fit, finishing steps included."""
+    marked interrupted; the separation of overlapping hands still runs after a stopped search).
+    config.time_limit_s bounds the search and the polish (not marked interrupted); the
+    separation always completes."""
     t0 = time.perf_counter()
     torch.manual_seed(config.seed)
     height, width = target.shape
@@ -134,7 +136,8 @@ def fit_frame(
     if any(o not in ("1", "2") for o in options):
         raise ValueError(f"--hands must be 1, 2 or auto, got {config.hands!r}")
     results = []
-    deadline = config.time_limit_s / len(options) if config.time_limit_s else None
+    limit = config.time_limit_s or None  # seconds; None or 0: no limit
+    deadline = limit / len(options) if limit else None
     for option in options:
         results.append(_fit_hands(target, scene, int(option), config, progress, deadline, extra_starts, anchor, stop))
         if results[-1][1].interrupted:
@@ -142,22 +145,23 @@ def fit_frame(
     # Prefer one hand unless two are clearly better.
     best = min(results, key=lambda r: (r[2]["key"][0], r[2]["key"][1] - (0.02 if r[0] == 1 else 0.0)))
     n_hands, res, _, searcher, sides = best
-    finish_interrupted = False
+    finish_interrupted, timed_out = False, False
 
-    def time_up() -> bool:
-        return config.time_limit_s is not None and time.perf_counter() - t0 > config.time_limit_s
+    def polish_stop() -> bool:
+        nonlocal timed_out
+        if stop is not None and stop():
+            return True
+        timed_out = limit is not None and time.perf_counter() - t0 > limit
+        return timed_out
 
-    try:  # the separation runs to its end unless stopped by hand: a result must not penetrate
-        poses = searcher.separate(res.poses, stop=stop)
+    try:  # the separation always runs to its end after a stopped search: a result must not penetrate
+        poses = searcher.separate(res.poses, stop=None if res.interrupted else stop)
         if not res.interrupted:
             rounds, near_rounds = POLISH_ROUNDS[config.quality]
-            poses = searcher.polish(
-                poses, rounds=rounds, near_rounds=near_rounds, stop=lambda: (stop is not None and stop()) or time_up()
-            )
+            poses = searcher.polish(poses, rounds=rounds, near_rounds=near_rounds, stop=polish_stop)
     except Interrupted as halt:  # Ctrl-C, stop or the time limit in the finishing steps: keep what they reached
-        poses = halt.poses
-        finish_interrupted = not time_up() or (stop is not None and stop())
-        if not finish_interrupted:
+        poses, finish_interrupted = halt.poses, not timed_out
+        if timed_out:
             log.info("the polish stopped at the time limit")
     poses = keep_between_light_and_wall(searcher, poses)
     shadow = searcher.shadows(poses)[0].cpu().numpy() > 0.5
