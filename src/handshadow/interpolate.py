@@ -20,7 +20,7 @@ from handshadow import losses
 from handshadow.hands.kinematics import rotation_angle_deg, rotmat_to_rotvec, slerp_rotations
 from handshadow.metrics import score
 from handshadow.render import gaussian_blur
-from handshadow.search import HandPoses, Hypotheses, Interrupted, Searcher, Stage
+from handshadow.search import HandPoses, Hypotheses, Interrupted, Searcher
 
 STEP_LIMIT_DEG = 8.0  # the hinge starts here, under the 10-degree bar
 PENETRATION_MM = 2.0  # a frame whose proxies overlap deeper than this counts as penetrating
@@ -75,6 +75,34 @@ def step_sizes_deg(path: list[HandPoses]) -> torch.Tensor:
     return torch.stack(steps, 1).amax(1)
 
 
+def path_smoothness(hands: list[tuple[torch.Tensor, ...]]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Smoothness terms of a path, each a scalar: the sum of squared first differences (joint,
+    wrist and rotation-vector steps in radians, wrist travel in units of 2 cm), of squared
+    second differences (the same but rotations), and the squared overshoot of every step
+    beyond STEP_LIMIT_DEG. hands: per hand (pose (F, 15, 3), rotation (F, 3, 3),
+    translation (F, 3), wrist (F, 2)) along the F frames."""
+    smooth = accel = hinge = 0
+    for pose, rot, trans, wrist in hands:
+        d_pose = pose[1:] - pose[:-1]
+        d_wrist = wrist[1:] - wrist[:-1]
+        d_rot = rotmat_to_rotvec(rot[:-1].transpose(-1, -2) @ rot[1:])
+        d_trans = (trans[1:] - trans[:-1]) / 0.02  # 2 cm weigh like a radian
+        smooth = smooth + sum((d**2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_rot, d_trans))
+        accel = accel + sum(((d[1:] - d[:-1]) ** 2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_trans))
+        biggest = torch.cat([d_pose.abs().flatten(1), d_wrist.abs(), d_rot.norm(dim=1, keepdim=True)], 1)
+        hinge = hinge + (torch.relu(biggest - np.radians(STEP_LIMIT_DEG)) ** 2).sum()
+    return smooth, accel, hinge
+
+
+def _morph_frames(morph: np.ndarray, height: int, searcher: Searcher) -> torch.Tensor:
+    """(F, height, W) float morph targets at the refinement's resolution."""
+    from skimage.transform import resize
+
+    width = round(morph.shape[2] * height / morph.shape[1])
+    small = np.stack([resize(m.astype(float), (height, width), order=1, anti_aliasing=True) for m in morph])
+    return torch.as_tensor(small, dtype=searcher.dtype, device=searcher.device)
+
+
 def refine_path(
     searcher: Searcher,
     path: list[HandPoses],
@@ -83,63 +111,41 @@ def refine_path(
     weights: PathWeights = PathWeights(),
     height: int = 96,
 ) -> list[HandPoses]:
-    """Optimise the in-between frames of a path (the first and last stay fixed). Ctrl-C raises
-    :class:`Interrupted` with the path as refined so far."""
+    """Optimise the in-between frames of a path (the first and last stay fixed): smoothness
+    over the whole path, and per frame penetration, placement and the morph target
+    ``morph`` (F, H, W) bool as a soft silhouette target. Ctrl-C raises :class:`Interrupted`
+    with the path as refined so far."""
+    from handshadow.render.shadow import shadow_mask
+
     frames = path[0].pose_rad.shape[0]
     if frames <= 2:
         return path
-    hyp = Hypotheses(path, searcher.limits).to(searcher.device)
-    free = torch.ones(frames, device=searcher.device)
-    free[0] = free[-1] = 0
-    opt = torch.optim.Adam(hyp.param_groups(0.3))
-    from skimage.transform import resize
-
-    morph_small = torch.as_tensor(
-        np.stack(
-            [
-                resize(m.astype(float), (height, round(m.shape[1] * height / m.shape[0])), order=1, anti_aliasing=True)
-                for m in morph
-            ]
-        ),
-        dtype=searcher.dtype,
-        device=searcher.device,
-    )
-    stage = Stage(height, 2.0, 0.0, 1, 1, skeleton=0.0)
-    scene, renderer, _ = searcher.level(height)
-    from handshadow.render.shadow import shadow_mask
-
-    lo, hi = searcher.height_range
+    hyp = None
     try:
+        hyp = Hypotheses(path, searcher.limits).to(searcher.device)
+        free = torch.ones(frames, device=searcher.device)  # the end frames stay the fits
+        free[0] = free[-1] = 0
+        opt = torch.optim.Adam(hyp.param_groups(0.3))
+        targets = _morph_frames(morph, height, searcher)
+        scene, renderer, _ = searcher.level(height)
+        blur = 2.0 * height / searcher.target.shape[0]  # 2 full-resolution pixels
+        lo, hi = searcher.height_range
         for _ in range(steps):
             opt.zero_grad(set_to_none=True)
-            outs, globals_, cur = [], [], []
-            for i, hand in enumerate(searcher.hands):
-                pose, rot, trans, wrist = hyp.hand(i)
-                outs.append(hand(pose, rot, trans, wrist))
-                globals_.append((rot, trans))
-                cur.append((pose, rot, trans, wrist))
+            hands = [hyp.hand(i) for i in range(len(searcher.hands))]
+            outs = [model(*h) for model, h in zip(searcher.hands, hands)]
             xy, h = renderer.project([o.vertices for o in outs])
             mask = shadow_mask(xy, renderer.topology, scene.image.height, scene.image.width)
-            blur = stage.blur_px * height / searcher.target.shape[0]
-            sil = ((gaussian_blur(mask, blur) - gaussian_blur(morph_small, blur)) ** 2).mean((1, 2))
-            centres = searcher.penetration.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_)
+            sil = ((gaussian_blur(mask, blur) - gaussian_blur(targets, blur)) ** 2).mean((1, 2))
+            centres = searcher.penetration.centres(
+                [(o.bone_rotations, o.bone_translations) for o in outs], [(rot, trans) for _, rot, trans, _ in hands]
+            )
             pen = losses.penetration(searcher.penetration.depths(centres, searcher.light_position))
             place = losses.placement(h, lo, hi)
-            smooth = accel = hinge = 0
-            for pose, rot, trans, wrist in cur:
-                d_pose = pose[1:] - pose[:-1]
-                d_wrist = wrist[1:] - wrist[:-1]
-                d_rot = rotmat_to_rotvec(rot[:-1].transpose(-1, -2) @ rot[1:])
-                d_trans = (trans[1:] - trans[:-1]) / 0.02  # 2 cm weigh like a radian
-                smooth = smooth + sum((d**2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_rot, d_trans))
-                accel = accel + sum(((d[1:] - d[:-1]) ** 2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_trans))
-                biggest = torch.cat([d_pose.abs().flatten(1), d_wrist.abs(), d_rot.norm(dim=1, keepdim=True)], 1)
-                hinge = hinge + (torch.relu(biggest - np.radians(STEP_LIMIT_DEG)) ** 2).sum()
+            smooth, accel, hinge = path_smoothness(hands)
+            per_frame = weights.penetration * pen + weights.placement * place + weights.morph * sil
             loss = (
-                weights.smooth * smooth
-                + weights.accel * accel
-                + weights.step_hinge * hinge
-                + ((weights.penetration * pen + weights.placement * place + weights.morph * sil) * free).sum()
+                weights.smooth * smooth + weights.accel * accel + weights.step_hinge * hinge + (per_frame * free).sum()
             )
             loss.backward()
             for p in hyp.parameters():
@@ -147,7 +153,7 @@ def refine_path(
                     p.grad *= free.view(-1, *([1] * (p.dim() - 1)))
             opt.step()
     except KeyboardInterrupt:  # the path as refined so far (still within the joint limits)
-        raise Interrupted(hyp.poses()) from None
+        raise Interrupted(hyp.poses() if hyp is not None else path) from None
     return hyp.poses()
 
 

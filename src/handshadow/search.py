@@ -377,13 +377,14 @@ class Searcher:
         with a penetration weight 100 times higher, until no proxies overlap by more than tol_mm.
         Batch-1 poses in and out; Ctrl-C, or ``stop`` returning True, raises
         :class:`Interrupted` with the poses reached."""
-        if float(self.penetration_mm(poses).max()) <= tol_mm:
-            return poses
-        stage = self._finishing_stage(max_steps)
-        weights = dataclasses.replace(self.weights, penetration=self.weights.penetration * 100)
-        hyp = Hypotheses(poses, self.limits).to(self.device)
-        opt = torch.optim.Adam(hyp.param_groups(stage.lr_scale))
+        hyp = None
         try:
+            if float(self.penetration_mm(poses).max()) <= tol_mm:
+                return poses
+            stage = self._finishing_stage(max_steps)
+            weights = dataclasses.replace(self.weights, penetration=self.weights.penetration * 100)
+            hyp = Hypotheses(poses, self.limits).to(self.device)
+            opt = torch.optim.Adam(hyp.param_groups(stage.lr_scale))
             for _ in range(max_steps):
                 if stop is not None and stop():
                     raise KeyboardInterrupt
@@ -394,7 +395,7 @@ class Searcher:
                 if float(self.penetration_mm(hyp.poses()).max()) <= tol_mm:
                     break
         except KeyboardInterrupt:  # Ctrl-C keeps the result as it stands
-            raise Interrupted(hyp.poses()) from None
+            raise Interrupted(hyp.poses() if hyp is not None else poses) from None
         log.info("separated the hands: deepest overlap %.1f mm", float(self.penetration_mm(hyp.poses()).max()))
         return hyp.poses()
 
@@ -422,11 +423,12 @@ class Searcher:
         best met so far."""
         w = self.weights
         weights = dataclasses.replace(w, gaps=w.gaps * 10, notches=4.0, spill=20.0, penetration=w.penetration * 100)
-        start = score(self.shadows(poses)[0].cpu().numpy() > 0.5, self.target, self._target_thin)
-        allowed = max(tol_mm, float(self.penetration_mm(poses).max()))
-        best_score, best, improved = start, poses, False
-        gen = torch.Generator(device="cpu").manual_seed(0)
+        best = poses
         try:
+            best_score = score(self.shadows(poses)[0].cpu().numpy() > 0.5, self.target, self._target_thin)
+            allowed = max(tol_mm, float(self.penetration_mm(poses).max()))
+            improved = False
+            gen = torch.Generator(device="cpu").manual_seed(0)
             for i in range(rounds + near_rounds):
                 if best_score.success and not always:
                     break
@@ -437,7 +439,7 @@ class Searcher:
                     best, best_score, weights, steps, copies, check_every, allowed, gen, stop
                 )
                 improved = rank_key(best_score) < rank_key(previous)
-        except KeyboardInterrupt:  # between steps
+        except KeyboardInterrupt:  # between steps, or while scoring the start
             raise Interrupted(best) from None
         return best
 
