@@ -183,9 +183,10 @@ class PathReport:
 
 @torch.no_grad()
 def report(
-    searcher: Searcher, path: list[HandPoses], target_a: np.ndarray, target_b: np.ndarray
+    searcher: Searcher, path: list[HandPoses], target_a: np.ndarray, target_b: np.ndarray, interrupted: bool = False
 ) -> tuple[PathReport, np.ndarray]:
-    """Measures of a path, and its exact shadows (frames, H, W) bool at full resolution."""
+    """Measures of a path, and its exact shadows (frames, H, W) bool at full resolution;
+    interrupted: the path is as refined so far (Ctrl-C)."""
     shadows = searcher.shadows(path).cpu().numpy() > 0.5
     a, b = np.asarray(target_a, bool), np.asarray(target_b, bool)
     start, end = score(shadows[0], a), score(shadows[-1], b)
@@ -205,5 +206,6 @@ def report(
         [iou(m, b) for m in shadows],
         steps.tolist(),
         depth.tolist(),
+        interrupted,
     )
     return rep, shadows

@@ -309,8 +309,7 @@ def interpolate_to_folder(
         path = refine_path(searcher, path, morph_targets(target_a, target_b, frames), steps=path_steps)
     except Interrupted as halt:
         path, interrupted = halt.poses, True
-    rep, shadows = report(searcher, path, target_a, target_b)
-    rep.interrupted = interrupted
+    rep, shadows = report(searcher, path, target_a, target_b, interrupted)
     scene = fit_a.pose_set.scene
     sides = [h.side for h in fit_a.pose_set.hands]
     poses_json = path_pose_file(path, sides, fit_a.pose_set, rep)
