@@ -419,7 +419,7 @@ if __name__ == "__main__":
     import imageio.v3 as iio
     import torch
 
-    from handshadow.pipeline import exact_shadow, pose_hands
+    from handshadow.hands.posed import cast_shadow
     from handshadow.posefile import parse_pose
 
     LIBRARY.mkdir(parents=True, exist_ok=True)
@@ -436,7 +436,7 @@ if __name__ == "__main__":
         (LIBRARY / f"{name}.json").write_text(json.dumps(data, indent=1) + "\n")
         pose_set = parse_pose({**data, "scene": scene.to_json()})
         with torch.no_grad():
-            mask = exact_shadow(scene, pose_hands(pose_set))
+            mask = cast_shadow(pose_set)[1]
         tile = (1 - mask) * 255
         tile[:2], tile[:, :2] = 128, 128
         tiles.append(tile)

@@ -21,13 +21,11 @@ EXIT_INTERRUPTED = 130
 def cmd_render(args: argparse.Namespace) -> int:
     from handshadow.posefile import load_pose_file
 
-    pose_set = load_pose_file(examples.pose_path(args.pose), frame=args.frame)  # checked before the heavy imports
-    from handshadow.pipeline import render_pose_set
+    posed = load_pose_file(examples.pose_path(args.pose), frame=args.frame)  # checked before the heavy imports
+    from handshadow.pipeline import render_to_folder
 
-    out = render_pose_set(pose_set, args.out, force=args.force, mano_dir=args.mano_dir)
-    print(
-        f"wrote {out}/: shadow.png scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in pose_set.hands)
-    )
+    out = render_to_folder(posed, args.out, force=args.force, mano_dir=args.mano_dir)
+    print(f"wrote {out}/: shadow.png scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in posed.hands))
     return 0
 
 
@@ -153,6 +151,7 @@ def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", qu
     p.add_argument("--no-forearm", action="store_true", help="hands without forearms")
     p.add_argument("--force", action="store_true", help="write into a non-empty folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log details")
 
 
 def cmd_app(args: argparse.Namespace) -> int:
