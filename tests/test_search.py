@@ -82,18 +82,52 @@ def test_parameters_stay_within_the_limits_whatever_the_step():
     assert bool(((hand.wrist_rad >= limits.wrist[:, 0]) & (hand.wrist_rad <= limits.wrist[:, 1])).all())
 
 
-def test_separate_leaves_no_proxies_overlapping_more_than_a_millimetre():
-    target, truth = known_target("bird", SIZE)
+def test_separate_parts_hands_that_pass_through_each_other_and_keeps_the_shadow():
+    target, truth = known_target("bird", SIZE)  # the library's bird: palms 18 mm into each other
     problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
     poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
-    # Push the left hand into the right one: the proxies overlap by centimetres.
-    right, left = poses.hands
-    into = PoseBatch([right, left.moved(right.translation - left.translation + torch.tensor([0.0, 0.0, 0.005]))])
-    assert float(problem.penetration_mm(into)[0]) > 10
-    apart = separate(problem, into)
-    assert float(problem.penetration_mm(apart)[0]) <= 1.0
-    # A pose without overlap comes back as it is.
+    assert problem.mesh_penetration(poses)[0].between_mm > 10
+    apart = separate(problem, poses)
+    assert problem.mesh_penetration(apart)[0].deepest_mm <= 3.0
+    assert score(problem.shadows(apart)[0].numpy() > 0.5, target).success
+    # A pose that passes comes back as it is.
     assert separate(problem, apart) is apart
+
+
+def test_separate_opens_a_fist_curled_into_its_palm():
+    target, truth = known_target("rabbit", SIZE)  # ring and little finger 12 mm into the palm
+    problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
+    poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
+    assert problem.mesh_penetration(poses)[0].within_mm[0] > 10
+    apart = separate(problem, poses)
+    assert problem.mesh_penetration(apart)[0].deepest_mm <= 3.0
+    assert score(problem.shadows(apart)[0].numpy() > 0.5, target).iou > 0.95
+
+
+def test_a_fit_whose_search_ends_in_penetration_comes_out_apart(monkeypatch):
+    from handshadow import fit as fit_module
+
+    target, truth = known_target("bird", SIZE)
+    inside = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])  # palms 18 mm deep
+    real_search, real_separate, seen = fit_module.run_stages, fit_module.separate, []
+
+    def search_ending_inside(problem, starts, stages, **kw):
+        result = real_search(problem, starts, stages, **kw)
+        result.poses = inside
+        return result
+
+    def watched(problem, poses, **kw):
+        seen.append(problem.mesh_penetration(poses)[0].deepest_mm)
+        return real_separate(problem, poses, **kw)
+
+    monkeypatch.setattr(fit_module, "run_stages", search_ending_inside)
+    monkeypatch.setattr(fit_module, "separate", watched)
+    result = fit_frame(target, FitConfig(hands="2", size=SIZE, quality="fast", iters=6))
+    assert seen and seen[0] > 10  # the search's result had the hands inside each other
+    assert result.penetration.deepest_mm <= 3.0 and result.performable
+    assert result.posed.fit["penetration_mm"] == round(result.penetration.deepest_mm, 2)
+    assert result.score == score(result.shadow, target)  # the shadow is scored as written
+    assert result.score.success
 
 
 def test_polish_improves_a_failing_pose_and_keeps_a_passing_one():

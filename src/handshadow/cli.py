@@ -69,8 +69,11 @@ def cmd_fit(args: argparse.Namespace) -> int:
     )
     s = result.score
     if not args.quiet:
-        state = "interrupted; best so far" if result.interrupted else ("success" if s.success else "done")
+        state = "interrupted; best so far" if result.interrupted else ("success" if result.success else "done")
         print(f"{state}: {s}, {result.steps} steps, {result.seconds:.0f} s")
+        pen = result.penetration
+        held = "a pose you can hold" if result.performable else "the hands pass through each other: not performable"
+        print(f"deepest penetration {pen.deepest_mm:.1f} mm ({held})")
         for line in lines:
             print(line)
         print(f"results in {folder}/ (guide.png shows how to hold your hands)")

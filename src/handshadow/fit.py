@@ -18,6 +18,7 @@ import torch
 
 from handshadow.hands import load_hand
 from handshadow.hands.limits import JointLimits
+from handshadow.hands.penetration import Penetration, hand_parts, penetration
 from handshadow.hands.posed import PosedMesh, cast_shadow
 from handshadow.metrics import FitScore, score
 from handshadow.posefile import parse_pose
@@ -73,11 +74,14 @@ class FitConfig:
 
 @dataclasses.dataclass
 class FitResult:
-    """A fit. ``shadow`` and ``score`` are those of exactly what ``posed`` holds as a file
-    (float64, rounded as pose.json and the OBJ files store it); ``meshes`` are those hands."""
+    """A fit. ``shadow``, ``score`` and ``penetration`` are those of exactly what ``posed``
+    holds as a file (float64, rounded as pose.json and the OBJ files store it); ``meshes`` are
+    those hands. ``success``: the shadow passes the success test and the pose is performable
+    (no vertex more than 3 mm inside other flesh, docs/metrics.md)."""
 
     posed: PosedScene
     score: FitScore
+    penetration: Penetration
     shadow: np.ndarray  # (H, W) bool at full resolution
     target: np.ndarray  # (H, W) bool
     meshes: list[PosedMesh]
@@ -86,6 +90,14 @@ class FitResult:
     interrupted: bool
     poses: PoseBatch  # the result as tensors (batch 1, hand-slot order as posed.hands)
     problem: Problem  # the search's context (hands, limits, renderers) for follow-up work
+
+    @property
+    def performable(self) -> bool:
+        return self.penetration.performable()
+
+    @property
+    def success(self) -> bool:
+        return self.score.success and self.performable
 
 
 @dataclasses.dataclass
@@ -233,20 +245,40 @@ def _result(target, scene, chosen: HandCountFit, poses: PoseBatch, config, steps
     meshes, mask = cast_shadow(posed, config.mano_dir)
     shadow = mask > 0.5
     sc = score(shadow, target)
-    info = {
-        **{k: (round(v, 4) if isinstance(v, float) else v) for k, v in sc.as_dict().items()},
-        "iterations": steps,
-        "seconds": round(seconds, 2),
-        "seed": config.seed,
-        "hands": chosen.n_hands,
-        "limits": config.limits,
-        "quality": config.quality,
-        "interrupted": interrupted,
-    }
+    pen = penetration(
+        [m.vertices for m in meshes], [m.faces for m in meshes], [hand_parts(m) for m in chosen.problem.models]
+    )
+    info = fit_info(sc, pen)
+    info.update(
+        iterations=steps,
+        seconds=round(seconds, 2),
+        seed=config.seed,
+        hands=chosen.n_hands,
+        limits=config.limits,
+        quality=config.quality,
+        interrupted=interrupted,
+    )
     posed = dataclasses.replace(posed, fit=info)
     return FitResult(
-        posed, sc, shadow, np.asarray(target, bool), meshes, steps, seconds, interrupted, poses, chosen.problem
+        posed, sc, pen, shadow, np.asarray(target, bool), meshes, steps, seconds, interrupted, poses, chosen.problem
     )
+
+
+def fit_info(sc: FitScore, pen: Penetration) -> dict:
+    """The measures pose.json's fit section holds: the shadow's (iou, boundary_f1, hd95,
+    thin_recall, shadow_success), the deepest penetration in mm (between the hands, within
+    each hand, overall), performable, and success (the shadow's and performable)."""
+    shadow = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in sc.as_dict().items()}
+    shadow["shadow_success"] = shadow.pop("success")
+    performable = pen.performable()
+    return {
+        **shadow,
+        "penetration_mm": round(pen.deepest_mm, 2),
+        "penetration_between_mm": round(pen.between_mm, 2),
+        "penetration_within_mm": [round(x, 2) for x in pen.within_mm],
+        "performable": performable,
+        "success": sc.success and performable,
+    }
 
 
 def _search(target, scene, n_hands, config, progress, deadline, extra_starts=None, anchor=None, stop=None):

@@ -128,7 +128,7 @@ def refine_path(
         blur = MORPH_BLUR_PX * level.scale
 
         def evaluate():
-            hands = [params.hand(i) for i in range(params.n_hands)]
+            hands = params.hands()
             outs = problem.pose(hands)
             shadow = level.renderer.render([o.vertices for o in outs])
             sil = ((gaussian_blur(shadow.mask, blur) - gaussian_blur(targets, blur)) ** 2).mean((1, 2))

@@ -282,6 +282,10 @@ class PoseParameters:
         rotation = rotvec_to_rotmat(self.rotvecs[i]) @ self._rot0[i]
         return HandPoseBatch(joints, rotation, self.translations[i], wrist)
 
+    def hands(self) -> list[HandPoseBatch]:
+        """Every hand slot's current poses (differentiable)."""
+        return [self.hand(i) for i in range(self.n_hands)]
+
     def poses(self) -> PoseBatch:
         """Current values as a PoseBatch, detached."""
         import torch
@@ -296,15 +300,14 @@ class PoseParameters:
         """(joint logits, wrist logits, rotation vector, translation) of hand slot i."""
         return self._angles[i][0][0], self._angles[i][1][0], self.rotvecs[i], self.translations[i]
 
-    def param_groups(self, rates) -> list[dict]:
+    def param_groups(self, rates, angles_only: bool = False) -> list[dict]:
         """Adam groups per hand: angles, rotation, translation, at ``rates``
-        (search.config.LearningRates, already scaled)."""
+        (search.config.LearningRates, already scaled); only the angles when ``angles_only``
+        (the hands' placement stays)."""
         groups = []
         for i in range(self.n_hands):
             joints, wrist, rotvec, trans = self.hand_parameters(i)
-            groups += [
-                {"params": [joints, wrist], "lr": rates.angles},
-                {"params": [rotvec], "lr": rates.rotation},
-                {"params": [trans], "lr": rates.translation},
-            ]
+            groups.append({"params": [joints, wrist], "lr": rates.angles})
+            if not angles_only:
+                groups += [{"params": [rotvec], "lr": rates.rotation}, {"params": [trans], "lr": rates.translation}]
         return groups

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 
+from handshadow.hands.penetration import TOLERANCE_MM
+
 
 @dataclasses.dataclass(frozen=True)
 class Stage:
@@ -71,17 +73,24 @@ class Reach:
 class Finishing:
     """The finishing steps after the search: separation and polish.
 
-    The separation takes small full-resolution steps with the penetration weight times
-    ``separation_penetration`` until no proxies overlap by more than ``tolerance_mm``.
+    The separation runs until the exact mesh test passes (no vertex more than
+    ``tolerance_mm`` inside other flesh, hands.penetration): first one hand passes in front of
+    the other along the light's rays (the smallest of ``pass_in_front_mm`` that parts them),
+    fingers bent into their own hand open (their bends scaled by the first of ``relax_bends``
+    that frees them), then rounds of ``separation_steps`` small steps of the joint and wrist
+    angles pushing the contacts out, with the contacts found afresh each round, at most
+    ``separation_rounds`` rounds. Both the separation and the polish step at ``lr_scale``.
     The polish runs ``copies`` copies of the result (all but the first jittered by
     ``jitter`` sigmas: joint logits, rotation vector in radians, translation in metres) for
     ``steps`` steps, scoring every ``check_every``, with the gaps weight times
     ``polish_gaps``, the notches and spill weights set, and the penetration weight times
     ``polish_penetration``."""
 
-    tolerance_mm: float = 1.0
-    separation_steps: int = 150
-    separation_penetration: float = 100.0
+    tolerance_mm: float = TOLERANCE_MM
+    pass_in_front_mm: tuple[float, ...] = (5, 10, 15, 20, 30, 40, 55, 70, 90)
+    relax_bends: tuple[float, ...] = (0.95, 0.9, 0.85, 0.8, 0.75, 0.7, 0.65, 0.6, 0.5, 0.4)
+    separation_rounds: int = 12
+    separation_steps: int = 10
     lr_scale: float = 0.15
     steps: int = 60
     copies: int = 4
@@ -100,9 +109,6 @@ class Finishing:
             spill=self.polish_spill,
             penetration=w.penetration * self.polish_penetration,
         )
-
-    def separation_weights(self, w: Weights) -> Weights:
-        return dataclasses.replace(w, penetration=w.penetration * self.separation_penetration)
 
     def stage(self, height: int, steps: int) -> Stage:
         """Small exact-shadow steps at full resolution, without the skeleton guides."""

@@ -24,6 +24,7 @@ def optimise(
     look_last: bool = False,
     stop: Callable[[], bool] | None = None,
     grad_mask: torch.Tensor | None = None,
+    angles_only: bool = False,
 ) -> int:
     """Take up to ``steps`` Adam steps; returns how many were taken.
 
@@ -39,8 +40,9 @@ def optimise(
         after: (step, evaluation) -> stop now?, called after each update.
         stop: checked after every update; True raises KeyboardInterrupt, as Ctrl-C does.
         grad_mask: (B,) factors on every parameter's gradient per hypothesis (0 holds one still).
+        angles_only: move the joint and wrist angles only, not the hands' placement.
     """
-    opt = torch.optim.Adam(params.param_groups(rates))
+    opt = torch.optim.Adam(params.param_groups(rates, angles_only))
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(1, steps), eta_min=0.0) if cosine else None
     for step in range(steps + 1 if look_last else steps):
         opt.zero_grad(set_to_none=True)

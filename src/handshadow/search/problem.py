@@ -13,6 +13,7 @@ from skimage.transform import resize
 
 from handshadow.hands.limits import JointLimits
 from handshadow.hands.model import HandModel, HandOutput
+from handshadow.hands.penetration import Penetration, hand_parts, penetration
 from handshadow.hands.proxies import PenetrationModel, hand_spheres
 from handshadow.losses import TargetMaps
 from handshadow.metrics import thin_parts
@@ -119,6 +120,21 @@ class Problem:
             [(o.bone_rotations, o.bone_translations) for o in outs], [(h.rotation, h.translation) for h in hands]
         )
         return self.penetration.depths(centres, self.light_position if light else None)
+
+    @torch.no_grad()
+    def mesh_penetration(self, poses: PoseBatch, within: bool = True) -> list[Penetration]:
+        """The exact test on the meshes (hands.penetration), per hypothesis: between the hands
+        and (unless not ``within``) within each, every inside vertex listed as a contact (item
+        = its hypothesis)."""
+        outs = self.pose(poses.hands)
+        faces = [m.faces.cpu().numpy() for m in self.models]
+        parts = [hand_parts(m) for m in self.models] if within else None
+        found = []
+        for k in range(poses.batch):
+            positions = [o.vertices[k].detach().cpu().double().numpy() for o in outs]
+            pen = penetration(positions, faces, parts)
+            found.append(dataclasses.replace(pen, contacts=pen.contacts.for_item(k)))
+        return found
 
     @torch.no_grad()
     def penetration_mm(self, poses: PoseBatch) -> torch.Tensor:

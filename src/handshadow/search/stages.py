@@ -75,7 +75,7 @@ def run_stages(
             params = PoseParameters(poses, problem.limits)
 
             def evaluate(stage=stage, params=params):
-                terms, shadow = objective(problem, [params.hand(i) for i in range(params.n_hands)], stage)
+                terms, shadow = objective(problem, params.hands(), stage)
                 return terms.total, (terms, shadow)
 
             def after(step, seen, si=si, stage=stage, params=params):
