@@ -71,13 +71,27 @@ def cmd_fit(args: argparse.Namespace) -> int:
     if not args.quiet:
         state = "interrupted; best so far" if result.interrupted else ("success" if result.success else "done")
         print(f"{state}: {s}, {result.steps} steps, {result.seconds:.0f} s")
-        pen = result.penetration
-        held = "a pose you can hold" if result.performable else "the hands pass through each other: not performable"
-        print(f"deepest penetration {pen.deepest_mm:.1f} mm ({held})")
+        for line in performance_lines(result):
+            print(line)
         for line in lines:
             print(line)
         print(f"results in {folder}/ (guide.png shows how to hold your hands)")
     return EXIT_INTERRUPTED if result.interrupted else 0
+
+
+def performance_lines(result) -> list[str]:
+    """What the CLI says about holding the pose: penetration, arms, performers."""
+    pen, arms = result.penetration, result.arms
+    held = "within what skin gives" if pen.performable() else "the hands pass through each other: not performable"
+    lines = [f"deepest penetration {pen.deepest_mm:.1f} mm ({held})"]
+    if arms.performers > 1:
+        lines.append(
+            f"the elbows are {arms.span_m:.2f} m apart: more than one person reaches"
+            + (" (two performers, as asked)" if result.problem.reach.performers > 1 else "; try --performers 2")
+        )
+    if not arms.upper_arms_hidden:
+        lines.append("an elbow's shadow is in the picture: the upper arm will show too")
+    return lines
 
 
 def _fit_config(args: argparse.Namespace):
@@ -99,6 +113,7 @@ def _fit_config(args: argparse.Namespace):
         light=args.light,
         forearm=not args.no_forearm,
         quality=args.quality,
+        performers=args.performers,
     )
     if config.hand_model == "mano":
         from handshadow.hands import load_rig
@@ -152,6 +167,13 @@ def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", qu
     p.add_argument("--limits", default="anatomical", choices=["anatomical", "paper"], help="joint-limit preset")
     p.add_argument("--light", default="point", choices=["point", "directional"])
     p.add_argument("--no-forearm", action="store_true", help="hands without forearms")
+    p.add_argument(
+        "--performers",
+        type=int,
+        default=1,
+        choices=[1, 2],
+        help="people holding the hands (default 1; 2 lifts the limit on how far apart the arms are)",
+    )
     p.add_argument("--force", action="store_true", help="write into a non-empty folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log details")

@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from handshadow.hands import load_hand
+from handshadow.hands.arms import ArmCheck, check_arms
 from handshadow.hands.limits import JointLimits
 from handshadow.hands.penetration import Penetration, hand_parts, penetration
 from handshadow.hands.posed import PosedMesh, cast_shadow
@@ -28,6 +29,7 @@ from handshadow.search import (
     Interrupted,
     Problem,
     Progress,
+    Reach,
     SearchResult,
     Stage,
     keep_between_light_and_wall,
@@ -55,7 +57,8 @@ class FitConfig:
     steps (None: the quality's default); quality: 'fast', 'default' or 'best';
     time_limit_s: bounds the search and the polish (None or 0: no limit);
     exclude_library: library poses the search must not start from (tests and benchmarks
-    whose targets are shadows of library poses)."""
+    whose targets are shadows of library poses); performers: 1, or 2 to let two people hold
+    the two hands (no limit on how far apart the arms are)."""
 
     hands: str = "auto"
     size: int = 256
@@ -70,6 +73,7 @@ class FitConfig:
     quality: str = "default"
     time_limit_s: float | None = None
     exclude_library: tuple[str, ...] = ()
+    performers: int = 1
 
 
 @dataclasses.dataclass
@@ -82,6 +86,7 @@ class FitResult:
     posed: PosedScene
     score: FitScore
     penetration: Penetration
+    arms: ArmCheck
     shadow: np.ndarray  # (H, W) bool at full resolution
     target: np.ndarray  # (H, W) bool
     meshes: list[PosedMesh]
@@ -93,7 +98,8 @@ class FitResult:
 
     @property
     def performable(self) -> bool:
-        return self.penetration.performable()
+        """No vertex more than 3 mm inside other flesh, and arms the performers can hold."""
+        return self.penetration.performable() and self.arms.performers <= self.problem.reach.performers
 
     @property
     def success(self) -> bool:
@@ -248,7 +254,8 @@ def _result(target, scene, chosen: HandCountFit, poses: PoseBatch, config, steps
     pen = penetration(
         [m.vertices for m in meshes], [m.faces for m in meshes], [hand_parts(m) for m in chosen.problem.models]
     )
-    info = fit_info(sc, pen)
+    arms = arm_check(chosen.problem, poses)
+    info = fit_info(sc, pen, arms, chosen.problem.reach.performers)
     info.update(
         iterations=steps,
         seconds=round(seconds, 2),
@@ -260,22 +267,49 @@ def _result(target, scene, chosen: HandCountFit, poses: PoseBatch, config, steps
     )
     posed = dataclasses.replace(posed, fit=info)
     return FitResult(
-        posed, sc, pen, shadow, np.asarray(target, bool), meshes, steps, seconds, interrupted, poses, chosen.problem
+        posed,
+        sc,
+        pen,
+        arms,
+        shadow,
+        np.asarray(target, bool),
+        meshes,
+        steps,
+        seconds,
+        interrupted,
+        poses,
+        chosen.problem,
     )
 
 
-def fit_info(sc: FitScore, pen: Penetration) -> dict:
+@torch.no_grad()
+def arm_check(problem: Problem, poses: PoseBatch) -> ArmCheck:
+    """The arm rules (hands.arms) for a batch-1 pose: elbows out of the picture, their span."""
+    outs = problem.pose(poses.hands)
+    elbows = torch.stack([o.forearm_points[0, -1] for o in outs if o.forearm_points.shape[1]])
+    if not len(elbows):  # no forearms: nothing beyond the wrist to check
+        return ArmCheck((), 0.0, 1)
+    xy, _ = problem.scene.project(elbows)
+    image = problem.scene.image
+    return check_arms(xy.cpu().double().numpy(), elbows.cpu().double().numpy(), image.height, image.width)
+
+
+def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1) -> dict:
     """The measures pose.json's fit section holds: the shadow's (iou, boundary_f1, hd95,
     thin_recall, shadow_success), the deepest penetration in mm (between the hands, within
-    each hand, overall), performable, and success (the shadow's and performable)."""
+    each hand, overall), the arms (elbows out of the picture, their span, the performers the
+    pose needs), performable, and success (the shadow's and performable)."""
     shadow = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in sc.as_dict().items()}
     shadow["shadow_success"] = shadow.pop("success")
-    performable = pen.performable()
+    performable = pen.performable() and arms.performers <= performers
     return {
         **shadow,
         "penetration_mm": round(pen.deepest_mm, 2),
         "penetration_between_mm": round(pen.between_mm, 2),
         "penetration_within_mm": [round(x, 2) for x in pen.within_mm],
+        "elbows_out_of_picture": list(arms.elbows_out),
+        "elbow_span_m": round(arms.span_m, 3),
+        "performers": arms.performers,
         "performable": performable,
         "success": sc.success and performable,
     }
@@ -306,4 +340,4 @@ def make_problem(
     limits = [JointLimits.preset(config.limits, s, dtype=dtype, device=config.device) for s in sides]
     if anchor is not None:
         anchor = anchor.to(config.device)
-    return Problem(scene, target, models, limits, anchor=anchor)
+    return Problem(scene, target, models, limits, anchor=anchor, reach=Reach().for_performers(config.performers))

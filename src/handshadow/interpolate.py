@@ -18,6 +18,7 @@ from scipy import ndimage
 
 from handshadow import losses
 from handshadow.hands.kinematics import rotation_angle_deg, rotmat_to_rotvec, slerp_rotations
+from handshadow.hands.penetration import TOLERANCE_MM, Contacts, contact_penalty
 from handshadow.metrics import iou, score
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
 from handshadow.render import gaussian_blur
@@ -26,7 +27,8 @@ from handshadow.search.loop import optimise
 from handshadow.search.problem import resize_coverage
 
 STEP_LIMIT_DEG = 8.0  # the hinge starts here, under the 10-degree bar
-PENETRATION_MM = 2.0  # a frame whose proxies overlap deeper than this counts as penetrating
+CONTACT_ROUNDS = 6  # at most this many rounds of pushing the exact test's contacts out
+CONTACT_STEPS = 25
 TRAVEL_PER_RADIAN_M = 0.02  # in the smoothness terms, this much wrist travel weighs like a radian
 PATH_LR_SCALE = 0.3  # the refinement's learning rates, as a share of the search's
 MORPH_BLUR_PX = 2.0  # full-resolution pixels of blur on the morph's shadows and targets
@@ -68,6 +70,7 @@ class PathWeights:
     penetration: float = 2.0
     placement: float = 0.05
     morph: float = 0.3
+    contact: float = 0.5  # mesh vertices inside other flesh (the exact test's contacts), per cm^2
 
 
 def step_sizes_deg(path: PoseBatch) -> torch.Tensor:
@@ -109,41 +112,58 @@ def refine_path(
 ) -> PoseBatch:
     """Optimise the in-between frames of a path (the first and last stay fixed): smoothness
     over the whole path, and per frame penetration, placement and the morph target
-    ``morph`` (F, H, W) bool as a soft silhouette target. Ctrl-C raises :class:`Interrupted`
+    ``morph`` (F, H, W) bool as a soft silhouette target. Then, while the exact mesh test
+    finds frames whose hands pass through each other (hands.penetration), rounds of
+    CONTACT_STEPS more steps push those contacts out too. Ctrl-C raises :class:`Interrupted`
     with the path as refined so far."""
-    frames = path.batch
-    if frames <= 2:
+    if path.batch <= 2:
         return path
-    params = None
+    current = path
     try:
-        params = PoseParameters(path, problem.limits)
-        free = torch.ones(frames, dtype=problem.dtype, device=problem.device)  # the end frames stay the fits
-        free[0] = free[-1] = 0
         level = problem.level(height)
         targets = torch.as_tensor(
             np.stack([resize_coverage(m, *level.maps.target.shape) for m in morph]),
             dtype=problem.dtype,
             device=problem.device,
         )
-        blur = MORPH_BLUR_PX * level.scale
+        current = _refine(problem, current, level, targets, steps, weights)
+        for _ in range(CONTACT_ROUNDS):
+            found = problem.mesh_penetration(current)[1:-1]  # the end frames are the fits, apart
+            deep = [f.contacts for f in found if f.deepest_mm > TOLERANCE_MM]
+            if not deep:
+                break
+            current = _refine(problem, current, level, targets, CONTACT_STEPS, weights, Contacts.cat(deep))
+    except KeyboardInterrupt:  # between the rounds: the path as refined so far
+        raise Interrupted(current) from None
+    return current
 
-        def evaluate():
-            hands = params.hands()
-            outs = problem.pose(hands)
-            shadow = level.renderer.render([o.vertices for o in outs])
-            sil = ((gaussian_blur(shadow.mask, blur) - gaussian_blur(targets, blur)) ** 2).mean((1, 2))
-            pen = losses.penetration(problem.proxy_depths(hands, outs))
-            place = losses.placement(shadow.heights, *problem.placement_range)
-            smooth, accel, hinge = path_smoothness(hands)
-            per_frame = weights.penetration * pen + weights.placement * place + weights.morph * sil
-            loss = (
-                weights.smooth * smooth + weights.accel * accel + weights.step_hinge * hinge + (per_frame * free).sum()
-            )
-            return loss, None
 
+def _refine(problem, path, level, targets, steps, weights, contacts: Contacts | None = None) -> PoseBatch:
+    """Steps of the path objective (plus the contacts' push, when given); Ctrl-C raises
+    Interrupted with the path reached."""
+    params = PoseParameters(path, problem.limits)
+    free = torch.ones(path.batch, dtype=problem.dtype, device=problem.device)  # the end frames stay the fits
+    free[0] = free[-1] = 0
+    blur = MORPH_BLUR_PX * level.scale
+
+    def evaluate():
+        hands = params.hands()
+        outs = problem.pose(hands)
+        shadow = level.renderer.render([o.vertices for o in outs])
+        sil = ((gaussian_blur(shadow.mask, blur) - gaussian_blur(targets, blur)) ** 2).mean((1, 2))
+        pen = losses.penetration(problem.proxy_depths(hands, outs))
+        place = losses.placement(shadow.heights, *problem.placement_range)
+        smooth, accel, hinge = path_smoothness(hands)
+        per_frame = weights.penetration * pen + weights.placement * place + weights.morph * sil
+        if contacts is not None:
+            per_frame = per_frame + weights.contact * contact_penalty([o.vertices for o in outs], contacts)
+        loss = weights.smooth * smooth + weights.accel * accel + weights.step_hinge * hinge + (per_frame * free).sum()
+        return loss, None
+
+    try:
         optimise(params, evaluate, steps, problem.rates.scaled(PATH_LR_SCALE), grad_mask=free)
-    except KeyboardInterrupt:  # the path as refined so far (still within the joint limits)
-        raise Interrupted(params.poses() if params is not None else path) from None
+    except KeyboardInterrupt:
+        raise Interrupted(params.poses()) from None
     return params.poses()
 
 
@@ -180,7 +200,7 @@ def report(
     shadows = problem.shadows(path).cpu().numpy() > 0.5
     a, b = np.asarray(target_a, bool), np.asarray(target_b, bool)
     start, end = score(shadows[0], a), score(shadows[-1], b)
-    depth = problem.penetration_mm(path).cpu().numpy()
+    depth = np.array([p.deepest_mm for p in problem.mesh_penetration(path)])
     steps = step_sizes_deg(path).cpu().numpy()
     rep = PathReport(
         start.iou,
@@ -190,7 +210,7 @@ def report(
         start.hd95,
         end.hd95,
         float(steps.max()) if len(steps) else 0.0,
-        int((depth > PENETRATION_MM).sum()),
+        int((depth > TOLERANCE_MM).sum()),
         iou(shadows, a).tolist(),
         iou(shadows, b).tolist(),
         steps.tolist(),

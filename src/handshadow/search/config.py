@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from handshadow.hands.arms import ELBOW_SPAN_M
 from handshadow.hands.penetration import TOLERANCE_MM
 
 
@@ -41,7 +42,8 @@ class Weights:
     attraction: float = 0.3
     penetration: float = 0.02
     placement: float = 0.05
-    reach: float = 0.05  # two wrists within one person's reach (Reach)
+    reach: float = 0.05  # wrists and elbows within one person's reach (Reach)
+    arms: float = 2.0  # elbows out of the picture (Reach), per squared frame height
     inside: float = 3.0  # joints and forearm axes project into the target
     thin_pull: float = 3.0  # fingers reach the target's thin parts
     anchor: float = 0.002  # closeness to anchor poses, when the search has some
@@ -62,11 +64,21 @@ class LearningRates:
 
 @dataclasses.dataclass(frozen=True)
 class Reach:
-    """What one person's two hands can span: the wrists at most this far apart (metres), with
-    a soft margin."""
+    """What the performers' arms allow (docs/performing.md): the two wrists at most
+    ``max_wrist_gap_m`` apart and the two elbows at most ``max_elbow_span_m`` (one person:
+    shoulder breadth and two upper arms), each with a soft margin; every elbow's shadow
+    ``elbow_margin_share`` of the frame height outside the picture, so the upper arm and the
+    body stay out of it. Two performers have no span limits."""
 
+    performers: int = 1
     max_wrist_gap_m: float = 0.45
+    max_elbow_span_m: float = ELBOW_SPAN_M
     margin_m: float = 0.05
+    elbow_margin_share: float = 0.02
+
+    def for_performers(self, n: int) -> Reach:
+        inf = float("inf")
+        return dataclasses.replace(self, performers=n) if n == 1 else Reach(n, inf, inf, self.margin_m)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -46,7 +46,8 @@ class LossTerms:
     anchor: torch.Tensor  # placement away from the anchor poses
     penetration: torch.Tensor  # collision proxies overlapping
     placement: torch.Tensor  # vertices off the working range between wall and lamp
-    reach: torch.Tensor  # wrists farther apart than one person reaches
+    reach: torch.Tensor  # wrists or elbows farther apart than the performers reach
+    arms: torch.Tensor  # elbows in the picture (the upper arm would cast a shadow there)
 
     @property
     def total(self) -> torch.Tensor:
@@ -84,10 +85,7 @@ def objective(
         inside, thin_pull = _skeleton_terms(level, outs)
         inside, thin_pull = stage.skeleton * w.inside * inside, stage.skeleton * w.thin_pull * thin_pull
     anchor = w.anchor * anchor_distance(hands, problem.anchor.hands) if problem.anchor is not None else zero
-    reach = zero
-    if len(hands) == 2:
-        gap = (hands[0].translation - hands[1].translation).norm(dim=1)
-        reach = w.reach * losses.soft_range(gap, 0.0, problem.reach.max_wrist_gap_m, problem.reach.margin_m)
+    reach, arms = _arm_terms(problem, level, hands, outs, w)
     terms = LossTerms(
         image=image,
         excess=w.excess * losses.excess(mask, maps.outside_dist),
@@ -99,8 +97,30 @@ def objective(
         penetration=w.penetration * losses.penetration(problem.proxy_depths(hands, outs)),
         placement=w.placement * losses.placement(shadow.heights, *problem.placement_range),
         reach=reach,
+        arms=arms,
     )
     return terms, shadow
+
+
+def _arm_terms(problem: Problem, level: Level, hands, outs, w: Weights) -> tuple[torch.Tensor, torch.Tensor]:
+    """(reach, arms) weighted (B,) terms: wrists and elbows within the performers' reach, and
+    every elbow's shadow out of the picture (hands.arms)."""
+    r = problem.reach
+    zero = hands[0].translation.new_zeros(hands[0].batch)
+    elbows = [o.forearm_points[:, -1] for o in outs if o.forearm_points.shape[1]]
+    reach = arms = zero
+    if len(hands) == 2:
+        gap = (hands[0].translation - hands[1].translation).norm(dim=1)
+        reach = losses.soft_range(gap, 0.0, r.max_wrist_gap_m, r.margin_m)
+        if len(elbows) == 2:
+            span = (elbows[0] - elbows[1]).norm(dim=1)
+            reach = reach + losses.soft_range(span, 0.0, r.max_elbow_span_m, r.margin_m)
+        reach = w.reach * reach
+    if elbows and w.arms:
+        xy, _ = level.scene.project(torch.stack(elbows, 1))
+        height, width = level.scene.image.height, level.scene.image.width
+        arms = w.arms * losses.inside_frame(xy, height, width, r.elbow_margin_share * height)
+    return reach, arms
 
 
 def _image_maps(level: Level, blur: float, w: Weights) -> tuple[torch.Tensor, torch.Tensor]:
