@@ -89,8 +89,10 @@ def performance_lines(result) -> list[str]:
             f"the elbows are {arms.span_m:.2f} m apart: more than one person reaches"
             + (" (two performers, as asked)" if result.problem.reach.performers > 1 else "; try --performers 2")
         )
+    if not all(arms.leads_back):
+        lines.append("a forearm points toward the wall: the elbow should be on your side of the hand")
     if not arms.upper_arms_hidden:
-        lines.append("an elbow's shadow is in the picture: the upper arm will show too")
+        lines.append("an elbow's shadow falls in the picture: your upper arm may show there too")
     return lines
 
 

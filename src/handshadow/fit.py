@@ -99,7 +99,7 @@ class FitResult:
     @property
     def performable(self) -> bool:
         """No vertex more than 3 mm inside other flesh, and arms the performers can hold."""
-        return self.penetration.performable() and self.arms.performers <= self.problem.reach.performers
+        return self.penetration.performable() and self.arms.holdable(self.problem.reach.performers)
 
     @property
     def success(self) -> bool:
@@ -284,29 +284,34 @@ def _result(target, scene, chosen: HandCountFit, poses: PoseBatch, config, steps
 
 @torch.no_grad()
 def arm_check(problem: Problem, poses: PoseBatch) -> ArmCheck:
-    """The arm rules (hands.arms) for a batch-1 pose: elbows out of the picture, their span."""
-    outs = problem.pose(poses.hands)
-    elbows = torch.stack([o.forearm_points[0, -1] for o in outs if o.forearm_points.shape[1]])
-    if not len(elbows):  # no forearms: nothing beyond the wrist to check
-        return ArmCheck((), 0.0, 1)
-    xy, _ = problem.scene.project(elbows)
+    """The arm rules (hands.arms) for a batch-1 pose."""
+    outs = [(h, o) for h, o in zip(poses.hands, problem.pose(poses.hands)) if o.forearm_points.shape[1]]
+    if not outs:  # no forearms: nothing beyond the wrist to check
+        return ArmCheck((), (), 0.0, 1)
+    elbows = torch.stack([o.forearm_points[0, -1] for _, o in outs])
+    wrists = torch.stack([h.translation[0] for h, _ in outs])
+    xy, elbow_heights = problem.scene.project(elbows)
+    _, wrist_heights = problem.scene.project(wrists)
     image = problem.scene.image
-    return check_arms(xy.cpu().double().numpy(), elbows.cpu().double().numpy(), image.height, image.width)
+    as_np = lambda t: t.cpu().double().numpy()  # noqa: E731
+    return check_arms(as_np(xy), as_np(elbows), as_np(elbow_heights), as_np(wrist_heights), image.height, image.width)
 
 
 def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1) -> dict:
     """The measures pose.json's fit section holds: the shadow's (iou, boundary_f1, hd95,
     thin_recall, shadow_success), the deepest penetration in mm (between the hands, within
-    each hand, overall), the arms (elbows out of the picture, their span, the performers the
-    pose needs), performable, and success (the shadow's and performable)."""
+    each hand, overall), the arms (forearms leading back, elbows out of the picture, their
+    span, the performers the pose needs), performable, and success (the shadow's and
+    performable)."""
     shadow = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in sc.as_dict().items()}
     shadow["shadow_success"] = shadow.pop("success")
-    performable = pen.performable() and arms.performers <= performers
+    performable = pen.performable() and arms.holdable(performers)
     return {
         **shadow,
         "penetration_mm": round(pen.deepest_mm, 2),
         "penetration_between_mm": round(pen.between_mm, 2),
         "penetration_within_mm": [round(x, 2) for x in pen.within_mm],
+        "forearms_lead_back": list(arms.leads_back),
         "elbows_out_of_picture": list(arms.elbows_out),
         "elbow_span_m": round(arms.span_m, 3),
         "performers": arms.performers,

@@ -8,14 +8,18 @@ from handshadow import losses
 from handshadow.hands.arms import ELBOW_SPAN_M, check_arms
 
 
-def test_elbows_in_the_picture_and_too_far_apart_are_reported():
+def test_forearms_elbows_and_reach_are_reported():
     inside = np.array([[50.0, 60.0], [300.0, 20.0]])  # the first in a 256 x 256 frame, the second beyond it
     near = np.array([[0.2, 0.0, 1.0], [-0.2, 0.0, 1.0]])
-    check = check_arms(inside, near, 256, 256)
+    wrists = np.array([1.0, 1.0])
+    check = check_arms(inside, near, np.array([1.1, 0.9]), wrists, 256, 256)
     assert check.elbows_out == (False, True) and not check.upper_arms_hidden
-    assert check.span_m == 0.4 and check.performers == 1
+    assert check.leads_back == (True, False)  # the second elbow is 10 cm nearer the wall than its wrist
+    assert check.span_m == 0.4 and check.performers == 1 and not check.holdable()
     far = np.array([[0.6, 0.0, 1.0], [-0.6, 0.0, 1.0]])
-    assert 1.2 > ELBOW_SPAN_M and check_arms(inside, far, 256, 256).performers == 2
+    spread = check_arms(inside, far, np.array([1.1, 1.0]), wrists, 256, 256)
+    assert 1.2 > ELBOW_SPAN_M and spread.performers == 2
+    assert not spread.holdable() and spread.holdable(performers=2)
 
 
 def test_inside_frame_pushes_a_point_out_by_the_nearest_edge():

@@ -43,7 +43,10 @@ class Weights:
     penetration: float = 0.02
     placement: float = 0.05
     reach: float = 0.05  # wrists and elbows within one person's reach (Reach)
-    arms: float = 2.0  # elbows out of the picture (Reach), per squared frame height
+    arms: float = 0.5  # forearms lead back: elbow no nearer the wall than its wrist (per Reach.margin_m, squared)
+    elbows_out: float = (
+        0.0  # elbows' shadows out of the picture, per squared frame height (off: see docs/performing.md)
+    )
     inside: float = 3.0  # joints and forearm axes project into the target
     thin_pull: float = 3.0  # fingers reach the target's thin parts
     anchor: float = 0.002  # closeness to anchor poses, when the search has some
@@ -66,9 +69,9 @@ class LearningRates:
 class Reach:
     """What the performers' arms allow (docs/performing.md): the two wrists at most
     ``max_wrist_gap_m`` apart and the two elbows at most ``max_elbow_span_m`` (one person:
-    shoulder breadth and two upper arms), each with a soft margin; every elbow's shadow
-    ``elbow_margin_share`` of the frame height outside the picture, so the upper arm and the
-    body stay out of it. Two performers have no span limits."""
+    shoulder breadth and two upper arms), each with a soft margin of ``margin_m``; when the
+    elbows are kept out of the picture (Weights.elbows_out), by ``elbow_margin_share`` of the
+    frame height. Two performers have no span limits."""
 
     performers: int = 1
     max_wrist_gap_m: float = 0.45

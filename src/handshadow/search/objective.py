@@ -17,6 +17,7 @@ import dataclasses
 import torch
 
 from handshadow import losses
+from handshadow.hands.arms import BACK_SLACK_M
 from handshadow.hands.kinematics import rotmat_to_rotvec
 from handshadow.hands.rig import KEYPOINT_NAMES
 from handshadow.poses import HandPoseBatch
@@ -47,7 +48,7 @@ class LossTerms:
     penetration: torch.Tensor  # collision proxies overlapping
     placement: torch.Tensor  # vertices off the working range between wall and lamp
     reach: torch.Tensor  # wrists or elbows farther apart than the performers reach
-    arms: torch.Tensor  # elbows in the picture (the upper arm would cast a shadow there)
+    arms: torch.Tensor  # forearms that do not lead back toward the performer (and elbows in the picture)
 
     @property
     def total(self) -> torch.Tensor:
@@ -103,11 +104,13 @@ def objective(
 
 
 def _arm_terms(problem: Problem, level: Level, hands, outs, w: Weights) -> tuple[torch.Tensor, torch.Tensor]:
-    """(reach, arms) weighted (B,) terms: wrists and elbows within the performers' reach, and
-    every elbow's shadow out of the picture (hands.arms)."""
+    """(reach, arms) weighted (B,) terms (hands.arms): wrists and elbows within the performers'
+    reach; forearms leading back toward the performer (no elbow nearer the wall than its
+    wrist), and, when Weights.elbows_out is set, every elbow's shadow out of the picture."""
     r = problem.reach
     zero = hands[0].translation.new_zeros(hands[0].batch)
-    elbows = [o.forearm_points[:, -1] for o in outs if o.forearm_points.shape[1]]
+    with_forearm = [(h, o) for h, o in zip(hands, outs) if o.forearm_points.shape[1]]
+    elbows = [o.forearm_points[:, -1] for _, o in with_forearm]
     reach = arms = zero
     if len(hands) == 2:
         gap = (hands[0].translation - hands[1].translation).norm(dim=1)
@@ -117,9 +120,14 @@ def _arm_terms(problem: Problem, level: Level, hands, outs, w: Weights) -> tuple
             reach = reach + losses.soft_range(span, 0.0, r.max_elbow_span_m, r.margin_m)
         reach = w.reach * reach
     if elbows and w.arms:
+        normal = torch.as_tensor(problem.scene.wall.normal, dtype=zero.dtype, device=zero.device)
+        for (h, _), elbow in zip(with_forearm, elbows):
+            toward_wall = ((h.translation - elbow) @ normal) - BACK_SLACK_M  # wrist's height minus elbow's
+            arms = arms + w.arms * (torch.relu(toward_wall) / r.margin_m) ** 2
+    if elbows and w.elbows_out:
         xy, _ = level.scene.project(torch.stack(elbows, 1))
         height, width = level.scene.image.height, level.scene.image.width
-        arms = w.arms * losses.inside_frame(xy, height, width, r.elbow_margin_share * height)
+        arms = arms + w.elbows_out * losses.inside_frame(xy, height, width, r.elbow_margin_share * height)
     return reach, arms
 
 
