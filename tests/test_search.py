@@ -124,8 +124,9 @@ def test_a_fit_whose_search_ends_in_penetration_comes_out_apart(monkeypatch):
     monkeypatch.setattr(fit_module, "separate", watched)
     result = fit_frame(target, FitConfig(hands="2", size=SIZE, quality="fast", iters=6))
     assert seen and seen[0] > 10  # the search's result had the hands inside each other
-    assert result.penetration.deepest_mm <= 3.0 and result.performable
+    assert result.penetration.deepest_mm <= 3.0 and result.penetration.performable()
     assert result.posed.fit["penetration_mm"] == round(result.penetration.deepest_mm, 2)
+    assert result.posed.fit["performable"] == result.performable
     assert result.score == score(result.shadow, target)  # the shadow is scored as written
     assert result.score.success
 
