@@ -192,8 +192,7 @@ def cmd_app(args: argparse.Namespace) -> int:
         raise HandshadowError(f"--port must be 1..65535, got {args.port}")
     from handshadow.app import launch
 
-    print(f"handshadow app on http://{args.host}:{args.port or 7860} (Ctrl-C to stop)")
-    launch(args.host, args.port, block=True)
+    launch(args.host, args.port, block=True)  # prints its address once it listens
     return 0
 
 
