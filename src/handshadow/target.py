@@ -48,8 +48,10 @@ WORK_PX = 64  # longer side of the copy on which the wall's light is estimated
 ENVELOPE_SHARE = 0.6  # the closing's square, a share of that side: darker parts narrower than this are filled
 UNEVEN_GROUND = 0.1  # the ground's light varies by more than this share of the contrast: read as a photo
 SOFT_EDGE = 0.35  # an outline this much softer than the shape's typical one is light, not an edge
+MIN_CONTRAST = 0.1  # a shape less darker (or lighter) than its ground than this is no shape
 FAINT = 0.25  # a shape this little darker (or lighter) than its ground is read, with a warning
 PUT_RIGHT_SHARE = 0.005  # pieces put right over this share of the picture are worth a warning
+SOFT_OUTLINE = 0.15  # a reading whose outline is this soft in part is worth a warning
 EPS = 0.01  # keeps ratios of dark pixels finite
 
 
@@ -253,55 +255,103 @@ def _ring(image: np.ndarray) -> np.ndarray:
     return np.concatenate([image[0], image[-1], image[:, 0], image[:, -1]])
 
 
+@dataclasses.dataclass(frozen=True)
+class _PhotoReading:
+    """One polarity's reading of a photo: coverage (h, w) in [0, 1], contrast (how much darker,
+    or lighter, the shape is than its ground), put_right (share of pixels whose soft-edged
+    pieces were put right), spread (the ground's unevenness left) and border (share of the
+    outer ring read as shape)."""
+
+    coverage: np.ndarray
+    contrast: float
+    put_right: float
+    spread: float
+    border: float
+
+    @property
+    def misfit(self) -> float:
+        """Lower is likelier: the ground holds the border and is even once the light is out
+        (the wrong polarity leaves the light's unevenness in its ground); no shape is unlikely."""
+        return self.border + self.spread + (1.0 if self.contrast < MIN_CONTRAST else 0.0)
+
+
 def _read_photo(grey: np.ndarray, invert: bool | None) -> Reading:
     """The photo path: even out the wall's light, split shape from ground, put soft-edged
-    pieces right. Both a dark and a light shape are tried; the reading kept is the one whose
-    ground holds the border and is even once the light is out (the wrong one leaves the
-    light's unevenness in its ground)."""
+    pieces right. Both a dark and a light shape are read; the likelier is kept (the other
+    with ``invert``)."""
     readings = []
     for dark_shape in (True, False):
         coverage, contrast = _contrast_coverage(grey, _wall_light(grey, dark_shape), dark_shape)
-        readings.append((float((_ring(coverage) >= 0.5).mean()) + _ground_spread(coverage), coverage, contrast))
-    readings.sort(key=lambda r: r[0])
-    _, coverage, contrast = readings[1 if invert else 0]
-    if contrast < 0.1:
+        coverage, put_right = _soft_pieces(coverage)
+        border = float((_ring(coverage) >= 0.5).mean())
+        readings.append(_PhotoReading(coverage, contrast, put_right, _ground_spread(coverage), border))
+    readings.sort(key=lambda r: r.misfit)
+    r = readings[1 if invert else 0]
+    if r.contrast < MIN_CONTRAST:
         return Reading(np.zeros_like(grey), photo=True)
-    coverage, put_right = _soft_pieces(coverage)
     warning = None
-    if contrast < FAINT:
-        warning = f"the shape is faint ({contrast:.0%} from its ground): check target.png"
-    elif put_right > PUT_RIGHT_SHARE:
-        warning = f"the light is uneven across the shape ({put_right:.0%} read by its outline): check target.png"
-    elif _ground_spread(coverage) > UNEVEN_GROUND:
+    if r.contrast < FAINT:
+        warning = f"the shape is faint ({r.contrast:.0%} from its ground): check target.png"
+    elif r.put_right > PUT_RIGHT_SHARE:
+        warning = f"the light is uneven across the shape ({r.put_right:.0%} read by its outline): check target.png"
+    elif r.spread > UNEVEN_GROUND:
         warning = "the ground is uneven: check target.png"
-    return Reading(coverage, photo=True, warning=warning)
+    elif (soft := _soft_outline(r.coverage)) > SOFT_OUTLINE:
+        warning = f"{soft:.0%} of the outline is soft, perhaps light rather than shape: check target.png"
+    return Reading(r.coverage, photo=True, warning=warning)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Outline:
+    """The shape's outline in a coverage map: steepness (h, w), the coverage's gradient per
+    1/128 of the picture (the same for any resolution); outline (h, w) bool, the shape's edge
+    pixels; limit, the steepness below which an outline is soft (SOFT_EDGE times the shape's
+    typical, 75th-percentile, steepness)."""
+
+    steepness: np.ndarray
+    outline: np.ndarray
+    limit: float
+
+    @classmethod
+    def of(cls, coverage: np.ndarray) -> "_Outline | None":
+        unit = max(coverage.shape) / 128
+        gy, gx = np.gradient(ndi.gaussian_filter(coverage, max(1.0, unit)))
+        steepness = np.hypot(gx, gy) * unit
+        shape = coverage >= 0.5
+        outline = shape & ~ndi.binary_erosion(shape, border_value=1)
+        if not outline.any():
+            return None
+        return cls(steepness, outline, SOFT_EDGE * float(np.percentile(steepness[outline], 75)))
+
+    def soft_share(self) -> float:
+        """The share of the outline that is soft: light, not an edge."""
+        return float((self.steepness[self.outline] < self.limit).mean())
+
+
+def _soft_outline(coverage: np.ndarray) -> float:
+    edges = _Outline.of(coverage)
+    return 0.0 if edges is None else edges.soft_share()
 
 
 def _soft_pieces(coverage: np.ndarray) -> tuple[np.ndarray, float]:
-    """Fill the shape's holes and drop its pieces at the border whose outlines are much softer
-    than the shape's own (SOFT_EDGE): a hot spot behind a large shadow reads as a hole with no
-    edge, dark corners as pieces with no edge. Returns (coverage, share of pixels changed)."""
-    h, w = coverage.shape
-    unit = max(h, w) / 128  # gradients per 1/128 of the picture: the same for any resolution
-    smooth = ndi.gaussian_filter(coverage, max(1.0, unit))
-    gy, gx = np.gradient(smooth)
-    steepness = np.hypot(gx, gy) * unit
-    shape = coverage >= 0.5
-    outline = shape & ~ndi.binary_erosion(shape, border_value=1)
-    if not outline.any():
+    """Fill the shape's holes and drop its pieces at the border whose outlines are soft
+    (see _Outline): a hot spot behind a large shadow reads as a hole with no edge, dark
+    corners as pieces with no edge. Returns (coverage, share of pixels changed)."""
+    edges = _Outline.of(coverage)
+    if edges is None:
         return coverage, 0.0
-    sharp = np.percentile(steepness[outline], 75)
-    grow = max(1, round(2 * unit))
-    changed = np.zeros_like(shape)
+    shape = coverage >= 0.5
+    grow = max(1, round(2 * max(coverage.shape) / 128))
     # Holes: pieces of ground that do not touch the border.
-    soft_holes = _soft_components(~shape, ~shape & ndi.binary_dilation(shape), steepness, SOFT_EDGE * sharp, inner=True)
-    changed |= ndi.binary_dilation(soft_holes, iterations=grow) & ~shape | soft_holes
+    rim = ~shape & ndi.binary_dilation(shape)
+    holes = _soft_components(~shape, rim, edges.steepness, edges.limit, inner=True)
+    filled = holes | (ndi.binary_dilation(holes, iterations=grow) & ~shape)
     # Pieces of shape that touch the border.
-    soft_border = _soft_components(shape, outline, steepness, SOFT_EDGE * sharp, inner=False)
-    drop = ndi.binary_dilation(soft_border, iterations=grow)
-    coverage = np.where(changed, 1.0, coverage)
-    coverage = np.where(drop, 0.0, coverage)
-    return coverage, float((changed | (drop & shape)).mean())
+    dropped = ndi.binary_dilation(
+        _soft_components(shape, edges.outline, edges.steepness, edges.limit, inner=False), iterations=grow
+    )
+    coverage = np.where(dropped, 0.0, np.where(filled, 1.0, coverage))
+    return coverage, float((filled | (dropped & shape)).mean())
 
 
 def _soft_components(
