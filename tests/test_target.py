@@ -130,13 +130,17 @@ def test_invert_overrides_the_border_rule(tmp_path, shape):
     assert (inverted ^ expected).sum() <= 0.03 * expected.sum()
 
 
-@pytest.mark.parametrize("case", ["missing", "text", "empty", "full", "one-pixel", "truncated"])
+@pytest.mark.parametrize("case", ["missing", "text", "empty", "noisy-empty", "full", "one-pixel", "truncated"])
 def test_bad_targets_are_refused(tmp_path, case):
     path = tmp_path / f"{case}.png"
     if case == "text":
         path.write_text("this is not an image\n")
     elif case == "empty":
         iio.imwrite(path, np.full((50, 50), 255, np.uint8))
+    elif case == "noisy-empty":  # a phone photo of a blank wall: sensor noise and JPEG, nothing else
+        noise = np.random.default_rng(0).normal(0, 4, (120, 160, 3))
+        path = tmp_path / "wall.jpg"
+        Image.fromarray(np.clip(236 + noise, 0, 255).astype(np.uint8)).save(path, quality=60)
     elif case == "full":
         img = np.zeros((50, 50), np.uint8)
         img[0, :] = img[-1, :] = img[:, 0] = img[:, -1] = 255  # a light frame around a dark fill
@@ -220,6 +224,15 @@ def test_a_photo_file_reads_through_the_same_path(tmp_path):
     frame = load_target(tmp_path / "wall.jpg", 128, 128)
     expected = letterbox(truth.astype(float), 128, 128) >= 0.5
     assert (frame & expected).sum() / (frame | expected).sum() >= 0.95
+
+
+def test_a_dim_photo_reads_too():
+    """An underexposed photo: the wall at a quarter of full scale, the shadow 45 % darker."""
+    dim = photos.PhotoEffects(exposure=0.25, darkness=0.45, noise=0.01, hot_spot=0.3, vignetting=0.3, jpeg_quality=70)
+    photo, truth = photos.photo_of(_example_shape("swan"), dim, np.random.default_rng(6))
+    assert photo.max() < 110
+    iou, _ = photos.read_back(photo, truth)
+    assert iou >= 0.95
 
 
 def test_a_light_shape_on_a_dark_uneven_ground_reads_too():

@@ -231,7 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_fit_options(p, hands_default="2", quality_default="best")  # both ends must be good: a morph is judged by them
     p.set_defaults(func=cmd_interpolate)
 
-    p = sub.add_parser("app", help="a local web page to make hand shadows")
+    p = sub.add_parser("app", help="a local web page to make hand shadows (needs the [app] extra: Gradio)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1, this computer only)")
     p.add_argument("--port", type=int, help="port (default: 7860 or the next free one)")
     p.set_defaults(func=cmd_app)

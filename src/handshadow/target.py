@@ -49,6 +49,7 @@ ENVELOPE_SHARE = 0.6  # the closing's square, a share of that side: darker parts
 UNEVEN_GROUND = 0.1  # the ground's light varies by more than this share of the contrast: read as a photo
 SOFT_EDGE = 0.35  # an outline this much softer than the shape's typical one is light, not an edge
 MIN_CONTRAST = 0.1  # a shape less darker (or lighter) than its ground than this is no shape
+NOISE_MARGIN = 6  # ... and so is one that stands out less than this many times the ground's noise
 FAINT = 0.25  # a shape this little darker (or lighter) than its ground is read, with a warning
 PUT_RIGHT_SHARE = 0.005  # pieces put right over this share of the picture are worth a warning
 SOFT_OUTLINE = 0.15  # a reading whose outline is this soft in part is worth a warning
@@ -123,7 +124,7 @@ def _pixels(im) -> np.ndarray:
         values = np.asarray(im, dtype=np.float64)
         return values / max(1.0, float(values.max()))
     # Palettes, CMYK (Adobe's inverted CMYK included), YCbCr, LAB, HSV, premultiplied alpha.
-    keeps_alpha = transparent or "A" in mode or mode == "PA"
+    keeps_alpha = transparent or "A" in mode.upper()
     return np.asarray(im.convert("RGBA" if keeps_alpha else "RGB"))
 
 
@@ -178,8 +179,8 @@ def read_shape(rgba: np.ndarray, invert: bool | None = None) -> Reading:
         cover = 1.0 - cover
     # Stretch between the ground level and the shape level so grey shadows still count.
     lo, hi = np.percentile(cover, 1), np.percentile(cover, 99)
-    if hi - lo < 0.2:
-        return Reading(np.zeros_like(cover))
+    if hi - lo < 0.2:  # not a clean shape; a dim photo's may still be there, relative to its wall
+        return _read_photo(grey, invert)
     cover = np.clip((cover - lo) / (hi - lo), 0.0, 1.0)
     # Clean: the border sits at the ground's end of the range, and the ground is even (judged
     # before ``invert``, which says the other end is the shape).
@@ -245,8 +246,12 @@ def _contrast_coverage(grey: np.ndarray, light: np.ndarray, dark_shape: bool) ->
     if np.ptp(clipped) < 1e-6:
         return np.zeros_like(grey), 0.0
     split = threshold_otsu(clipped)
-    ground, shape = np.median(depth[depth < split]), np.median(depth[depth >= split])
+    ground_depth = depth[depth < split]
+    ground, shape = np.median(ground_depth), np.median(depth[depth >= split])
     contrast = float(shape - ground)
+    noise = 1.4826 * float(np.median(np.abs(ground_depth - ground)))  # the ground's spread, robustly
+    if contrast < NOISE_MARGIN * noise:  # Otsu split the noise of an empty picture
+        contrast = 0.0
     return np.clip((depth - ground) / max(contrast, 1e-3), 0.0, 1.0), contrast
 
 
