@@ -52,6 +52,7 @@ PREVIEW_EVERY_S = 0.7  # at most one live preview per this many seconds
 SIZES = ["64", "128", "256"]  # the frame's side: detail against time
 READY = "Pick a shape and press **Fit**."
 DRAW = "Draw a filled shape, then press **Fit**."
+CANCELLING = "Cancelling: keeping the best result so far..."
 
 
 class Session:
@@ -214,7 +215,7 @@ def read_for_page(source: str | None, invert: bool = False, size: int = 256) -> 
         return None, f"**Cannot use this picture:** {in_words(exc, source)}"
     picture = enlarged(mask_image(target.frame))
     if target.warning:
-        return picture, f"**Check the shape read below:** {target.warning}. Then press **Fit**."
+        return picture, f"**Warning:** {target.warning} (below). Then press **Fit**."
     return picture, "The shape as it will be read is below. Press **Fit**."
 
 
@@ -250,7 +251,7 @@ def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[Fi
     except HandshadowError as exc:
         yield FitUpdate(None, f"**Cannot use this picture:** {in_words(exc, source)}")
         return
-    note = f"  \n**Check target.png:** {target.warning}" if target.warning else ""
+    note = f"  \n**Warning:** {target.warning}" if target.warning else ""
     config = FitConfig(
         hands=options.hands,
         quality=options.quality,
@@ -273,7 +274,8 @@ def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[Fi
         if time.perf_counter() - last > PREVIEW_EVERY_S:
             last = time.perf_counter()
             preview = overlay_preview(target.frame, p.shadow, PREVIEW_ROWS)
-            yield FitUpdate(preview, f"Fitting... IoU {p.iou:.3f}" + note, fraction=fraction)
+            state = CANCELLING if session.cancel.is_set() else f"Fitting... IoU {p.iou:.3f}"
+            yield FitUpdate(preview, state + note, fraction=fraction)
     try:
         result_folder, result, lines = job.outcome()
     except Exception as exc:  # a fit's error, in words
@@ -310,8 +312,7 @@ def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size:
 
     folder = session.new_job("morph")
     try:
-        for source in (a, b):
-            read_target(target_path(source), 64, 64)
+        targets = [read_target(target_path(source), 64, 64) for source in (a, b)]
         config = FitConfig(hands=hands, quality="fast", size=size, device=_device())
         result, report = interpolate_to_folder(a, b, folder / "result", config, frames=frames, show_progress=False)
     except HandshadowError as exc:
@@ -320,7 +321,8 @@ def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size:
         return None, None, None, None, f"**The morph stopped:** {in_words(exc, a, b)}"
     zip_path = shutil.make_archive(str(folder / "handshadow-morph"), "zip", result)
     files = [str(result / n) for n in ("animation.mp4", "animation.gif", "path.png")]
-    return (*files, zip_path, report.summary())
+    warnings = [f"**Warning ({end}):** {t.warning}  \n" for end, t in zip(("first", "last"), targets) if t.warning]
+    return (*files, zip_path, "".join(warnings) + report.summary())
 
 
 # -- The page ------------------------------------------------------------------------------
@@ -582,7 +584,7 @@ def build_app(store: SessionStore | None = None):
 
     def on_cancel(request: gr.Request):
         session_of(request).cancel.set()
-        return "Cancelling: keeping the best result so far..."
+        return CANCELLING
 
     def on_morph(source_a, example_a, upload_a, source_b, example_b, upload_b, frames, hands, size,
                  request: gr.Request, progress=gr.Progress()):  # noqa: B008  # fmt: skip
