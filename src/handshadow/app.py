@@ -601,9 +601,14 @@ def build_app(store: SessionStore | None = None):
         shadow, morph = layout(gr, [name for name, _ in examples.list_targets()])
         picked = [shadow.source, shadow.upload, shadow.example, shadow.invert, shadow.size]
         shadow.source.change(show_source, shadow.source, [shadow.example, shadow.upload, shadow.drawing], queue=False)
-        for component in picked:
-            component.change(show_reading, picked, [shadow.reading, shadow.status], queue=False)
-        demo.load(show_reading, picked, [shadow.reading, shadow.status], queue=False)
+        gr.on(  # one listener for all: its runs follow each other, the last choice is the one shown
+            [demo.load, *(component.change for component in picked)],
+            show_reading,
+            picked,
+            [shadow.reading, shadow.status],
+            queue=False,
+            trigger_mode="always_last",
+        )
         shadow.fit.click(lambda: [None] * 6, outputs=shadow.results(), queue=False).then(
             on_fit,
             [shadow.source, shadow.upload, shadow.drawing, shadow.example, *shadow.options()],

@@ -100,12 +100,19 @@ def page(browser, app_url):
     pg = context.new_page()
     pg.requests = []
     pg.on("request", lambda r: pg.requests.append(r.url))
-    pg.goto(app_url)
-    pg.wait_for_selector("#fit")
+    _open(pg, app_url)
     yield pg
     hosts = {u.split("/")[2] for u in pg.requests if u.startswith("http")}
     assert hosts <= {app_url.split("/")[2]}, f"the page reached beyond localhost: {hosts}"
     context.close()
+
+
+def _open(page, url: str) -> None:
+    """Load the page and wait until it has read the default example (its first event), so
+    later events are not overtaken by it."""
+    page.goto(url)
+    page.wait_for_selector("#fit")
+    page.wait_for_function("() => /as it will be read/.test(document.querySelector('#status').innerText)")
 
 
 def _choose(page, group_id: str, label: str) -> None:
@@ -327,8 +334,7 @@ def test_two_visitors_at_once_each_get_their_own_result(browser, app_url, tmp_pa
     for kind in ("bird", "cross"):
         context = browser.new_context(viewport={"width": 1400, "height": 1500})
         pg = context.new_page()
-        pg.goto(app_url)
-        pg.wait_for_selector("#fit")
+        _open(pg, app_url)
         shapes[kind] = _blob(kind=kind)
         iio.imwrite(tmp_path / f"{kind}.png", np.where(shapes[kind], 0, 255).astype(np.uint8))
         _options(pg, "1")
