@@ -237,6 +237,7 @@ def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[Fi
     and zip. Cancel (the session's event) keeps the best so far. Errors end it with their message."""
     import imageio.v3 as iio
 
+    from handshadow.cli import performance_lines
     from handshadow.examples import target_path
     from handshadow.export.images import overlay_preview
     from handshadow.fit import FitConfig
@@ -282,14 +283,13 @@ def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[Fi
         yield FitUpdate(None, f"**The fit stopped:** {in_words(exc, source)}")
         return
     zip_path = shutil.make_archive(str(folder / "handshadow-result"), "zip", result_folder)
-    s = result.score
     status = (
         ("Cancelled: best result so far. " if result.interrupted else "")
-        + str(s)
-        + (" (a success)" if s.success else "")
+        + str(result.score)
+        + (" (a success)" if result.success else "")
         + note
         + "\n\n"
-        + "\n".join(line.strip() for line in lines)
+        + "\n".join(line.strip() for line in [*performance_lines(result), *lines])
     )
     overlay = enlarged(iio.imread(result_folder / "overlay.png"))
     yield FitUpdate(overlay, status, {"folder": str(result_folder), "zip": zip_path})
