@@ -56,11 +56,10 @@ def resolve_device(name: str) -> str:
 
 def cmd_fit(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
-    from handshadow.target import load_target
 
     out = Path(args.out) if args.out else Path("out") / Path(args.target).stem
     ResultFolder(out, args.force)  # refuse a non-empty folder before any work
-    load_target(examples.target_path(args.target), 64, 64, args.invert)  # bad targets fail fast, before torch loads
+    _check_target(args.target, args.invert)  # bad targets fail fast, before torch loads
     config = _fit_config(args)
     from handshadow.pipeline import fit_to_folder
 
@@ -96,6 +95,16 @@ def performance_lines(result) -> list[str]:
     return lines
 
 
+def _check_target(source: str, invert: bool | None = None) -> None:
+    """Read a target once, small, before the heavy imports: an unusable one raises its
+    one-line error; an unsure reading prints its one-line warning."""
+    from handshadow.target import read_target
+
+    target = read_target(examples.target_path(source), 64, 64, invert)
+    if target.warning:
+        print(f"handshadow: warning: {source}: {target.warning}", file=sys.stderr)
+
+
 def _fit_config(args: argparse.Namespace):
     from handshadow.fit import FitConfig
 
@@ -127,12 +136,11 @@ def _fit_config(args: argparse.Namespace):
 
 def cmd_interpolate(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
-    from handshadow.target import load_target
 
     out = Path(args.out) if args.out else Path("out") / f"{Path(args.a).stem}-to-{Path(args.b).stem}"
     ResultFolder(out, args.force)
     for source in (args.a, args.b):
-        load_target(examples.target_path(source), 64, 64)
+        _check_target(source)
     config = _fit_config(args)
     from handshadow.pipeline import interpolate_to_folder
 
@@ -186,8 +194,7 @@ def cmd_app(args: argparse.Namespace) -> int:
         raise HandshadowError(f"--port must be 1..65535, got {args.port}")
     from handshadow.app import launch
 
-    print(f"handshadow app on http://{args.host}:{args.port or 7860} (Ctrl-C to stop)")
-    launch(args.host, args.port, block=True)
+    launch(args.host, args.port, block=True)  # prints its address once it listens
     return 0
 
 
@@ -226,7 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_fit_options(p, hands_default="2", quality_default="best")  # both ends must be good: a morph is judged by them
     p.set_defaults(func=cmd_interpolate)
 
-    p = sub.add_parser("app", help="a local web page to make hand shadows")
+    p = sub.add_parser("app", help="a local web page to make hand shadows (needs the [app] extra: Gradio)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1, this computer only)")
     p.add_argument("--port", type=int, help="port (default: 7860 or the next free one)")
     p.set_defaults(func=cmd_app)

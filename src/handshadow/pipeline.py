@@ -14,13 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from skimage.transform import resize
 from tqdm import tqdm
 
 from handshadow import examples
 from handshadow.errors import HandshadowError
 from handshadow.export.files import ResultFolder, require_mp4, shadow_image, write_gif, write_json, write_mp4, write_png
-from handshadow.export.images import mask_image, overlay_image
+from handshadow.export.images import mask_image, overlay_image, overlay_preview
 from handshadow.export.meshes import write_glb, write_obj
 from handshadow.export.pictures import performer_framing, performer_view, scene_picture
 from handshadow.export.plots import path_plot
@@ -101,10 +100,7 @@ def progress_frames(frames: list[Progress], target: np.ndarray, posed: PosedScen
     for f, vs in zip(frames, vertices):
         meshes = [(h.side, v, fs) for h, fs, v in zip(posed.hands, faces, vs)]
         view = performer_view(posed.scene, meshes, size=(size, size), supersample=1, framing=framing)
-        small_target = resize(target.astype(float), f.shadow.shape, order=0) > 0.5
-        ov = overlay_image(small_target, f.shadow > 0.5)
-        ov = (resize(ov.astype(float) / 255, (size, size * ov.shape[1] // ov.shape[0]), order=0) * 255).astype(np.uint8)
-        frame = np.concatenate([view, ov], 1)
+        frame = np.concatenate([view, overlay_preview(target, f.shadow, size)], 1)
         frame[-14:, :] = 255
         bar = int(frame.shape[1] * f.done / max(f.total, 1))
         frame[-10:-4, :bar] = (70, 130, 200)
