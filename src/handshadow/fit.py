@@ -37,6 +37,7 @@ from handshadow.search import (
     run_stages,
     separate,
 )
+from handshadow.search.atlas import load_atlas
 from handshadow.search.starts import choose_starts
 
 log = logging.getLogger(__name__)
@@ -74,6 +75,7 @@ class FitConfig:
     time_limit_s: float | None = None
     exclude_library: tuple[str, ...] = ()
     performers: int = 1
+    atlas: bool = True
 
 
 @dataclasses.dataclass
@@ -325,7 +327,12 @@ def _search(target, scene, n_hands, config, progress, deadline, extra_starts=Non
     problem = make_problem(target, scene, sides, config, anchor)
     n_random, n_keep, stages = schedule(config.quality, config.iters, target.shape[0])
     rng = np.random.default_rng(config.seed)
-    starts = choose_starts(problem, sides, n_random, n_keep, rng, extra_starts, config.exclude_library)
+    atlas = (
+        load_atlas(config.hand_model, config.forearm, config.limits)
+        if config.atlas and config.hand_model == "anny"
+        else None
+    )
+    starts = choose_starts(problem, sides, n_random, n_keep, rng, extra_starts, config.exclude_library, atlas)
     res = run_stages(problem, starts, stages, progress=progress, deadline_s=deadline, stop=stop)
     return HandCountFit(n_hands, sides, problem, res)
 

@@ -318,7 +318,7 @@ class _Outline:
     limit: float
 
     @classmethod
-    def of(cls, coverage: np.ndarray) -> "_Outline | None":
+    def of(cls, coverage: np.ndarray) -> _Outline | None:
         unit = max(coverage.shape) / 128
         gy, gx = np.gradient(ndi.gaussian_filter(coverage, max(1.0, unit)))
         steepness = np.hypot(gx, gy) * unit
