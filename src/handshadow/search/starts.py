@@ -37,6 +37,7 @@ PER_LIBRARY_POSE = 2  # at most this many starts from any one library pose
 ATLAS_ONE = 48  # one hand: atlas entries nearest the target
 ATLAS_FIRST = 12  # two hands: entries nearest the target, as the first hand
 ATLAS_SECOND = 3  # ... and for each, entries nearest what it leaves uncovered, as the other
+HOLE_PENALTY = 0.3  # how much a start that fills the target's holes and notches loses (see start_score)
 ATLAS_SHARE = 0.5  # at most this share of the kept starts from the atlas (the rest stay diverse)
 SECOND_HAND_MIN_SHARE = 0.05  # less left uncovered than this share of the target: cover it all
 ALIGN_WALL_CLEARANCE_M = 0.15  # the alignment's scaling keeps hands this far from the wall
@@ -305,7 +306,7 @@ def choose_starts(
     if not point:
         scale = torch.ones_like(scale)
     moved = apply_similarity(cand.to("cpu"), angle, scale, shift, scene, ALIGN_FRAME_PX).to(problem.device)
-    overlap = iou(problem.shadows(moved, ALIGN_FRAME_PX).cpu(), target)
+    overlap = start_score(problem.shadows(moved, ALIGN_FRAME_PX).cpu(), problem.level(ALIGN_FRAME_PX).maps)
     order = torch.argsort(overlap, descending=True).tolist()
     picked = list(range(cand.batch - given.batch, cand.batch)) if given is not None else []  # aligned
     per_pose: dict[str, int] = {}
@@ -325,6 +326,18 @@ def choose_starts(
     log.info("starts: %s", ", ".join(f"{moved.origins[i]} {float(overlap[i]):.2f}" for i in picked[:8]))
     chosen = moved.select(picked)
     return PoseBatch.cat([cand.select(slice(cand.batch - given.batch, None)), chosen]) if given is not None else chosen
+
+
+def start_score(shadows: torch.Tensor, maps) -> torch.Tensor:
+    """(B,) how good a start is: its IoU with the target, less HOLE_PENALTY times the share of
+    the target's holes and narrow notches (losses.notches, graded) that it fills; a shadow
+    that closes the counter of a letter rarely opens it again. shadows (B, H, W) in [0, 1];
+    maps: the target's maps (losses.TargetMaps) at that resolution."""
+    target, notches = maps.target.cpu(), maps.notches.cpu()
+    score = iou(shadows, target)
+    if float(notches.sum()) > 0:
+        score = score - HOLE_PENALTY * (shadows * notches).sum((1, 2)) / notches.sum()
+    return score
 
 
 def atlas_starts(atlas: Atlas, target: torch.Tensor, sides: list[str], scene) -> PoseBatch:
