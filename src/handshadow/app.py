@@ -226,12 +226,6 @@ def enlarged(image: np.ndarray, rows: int = PREVIEW_ROWS) -> np.ndarray:
     return np.repeat(np.repeat(image, k, axis=0), k, axis=1)
 
 
-def _device() -> str:
-    import torch
-
-    return "cuda" if torch.cuda.is_available() else "cpu"
-
-
 def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[FitUpdate]:
     """A fit for the page: a live preview while it searches, then the result's overlay, folder
     and zip. Cancel (the session's event) keeps the best so far. Errors end it with their message."""
@@ -259,7 +253,7 @@ def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[Fi
         limits=options.limits,
         light=options.light,
         size=options.size,
-        device=_device(),
+        device="auto",
     )
 
     def work(report, stop):
@@ -313,7 +307,7 @@ def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size:
     folder = session.new_job("morph")
     try:
         targets = [read_target(target_path(source), 64, 64) for source in (a, b)]
-        config = FitConfig(hands=hands, quality="fast", size=size, device=_device())
+        config = FitConfig(hands=hands, quality="fast", size=size, device="auto")
         result, report = interpolate_to_folder(a, b, folder / "result", config, frames=frames, show_progress=False)
     except HandshadowError as exc:
         return None, None, None, None, f"**Cannot morph:** {in_words(exc, a, b)}"

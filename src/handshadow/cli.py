@@ -41,17 +41,9 @@ def cmd_examples(args: argparse.Namespace) -> int:
 
 def resolve_device(name: str) -> str:
     """'cpu', 'cuda' (checked) or 'auto' (CUDA when present)."""
-    import torch
+    from handshadow.fit import resolve_device as resolve
 
-    if name == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if name == "cuda" or name.startswith("cuda:"):
-        if not torch.cuda.is_available():
-            raise HandshadowError("CUDA was asked for but no CUDA device is available here (use --device cpu)")
-        return name
-    if name == "cpu":
-        return name
-    raise HandshadowError(f"unknown device {name!r} (use cpu, cuda or auto)")
+    return resolve(name)
 
 
 def cmd_fit(args: argparse.Namespace) -> int:

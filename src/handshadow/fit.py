@@ -16,6 +16,7 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
+from handshadow.errors import HandshadowError
 from handshadow.hands import load_hand
 from handshadow.hands.arms import ArmCheck, check_arms
 from handshadow.hands.limits import JointLimits
@@ -47,6 +48,7 @@ QUALITY = ("fast", "default", "best")
 POLISH_ROUNDS = {"fast": (1, 0), "default": (2, 4), "best": (3, 6)}
 # --hands auto prefers one hand unless two score better by more than this (rank-key blend).
 ONE_HAND_PREFERENCE = 0.02
+CUDA_WIDER = 16  # on a GPU the search keeps this many times the hypotheses (see schedule)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,7 +66,7 @@ class FitConfig:
     hands: str = "auto"
     size: int = 256
     iters: int | None = None
-    device: str = "cpu"
+    device: str = "auto"
     seed: int = 0
     hand_model: str = "anny"
     mano_dir: str | None = None
@@ -123,8 +125,23 @@ class HandCountFit:
         return failed, blend - (ONE_HAND_PREFERENCE if self.n_hands == 1 else 0.0)
 
 
-def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list[Stage]]:
-    """(random starts, kept starts, stages) for a quality, scaled to a total step budget."""
+def resolve_device(name: str) -> str:
+    """'cpu', 'cuda' / 'cuda:N' (checked) or 'auto' (CUDA when present, else the CPU)."""
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" or name.startswith("cuda:"):
+        if not torch.cuda.is_available():
+            raise HandshadowError("CUDA was asked for but no CUDA device is available here (use --device cpu)")
+        return name
+    if name == "cpu":
+        return name
+    raise HandshadowError(f"unknown device {name!r} (use cpu, cuda or auto)")
+
+
+def schedule(quality: str, iters: int | None, size: int, device: str = "cpu") -> tuple[int, int, list[Stage]]:
+    """(random starts, kept starts, stages) for a quality, scaled to a total step budget. On a
+    GPU a batch of a thousand hypotheses costs about what one does, so it keeps CUDA_WIDER
+    times the starts and CUDA_WIDER / 4 times the survivors of every stage but the last."""
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
     s = Stage
@@ -160,6 +177,9 @@ def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list
         ),
     }[quality]
     stages = [dataclasses.replace(st, height=min(st.height, size)) for st in stages]
+    if device.startswith("cuda"):
+        n_random, n_keep = n_random * CUDA_WIDER, n_keep * CUDA_WIDER
+        stages = [dataclasses.replace(st, keep=st.keep * CUDA_WIDER // 4) for st in stages[:-1]] + stages[-1:]
     if iters is not None:
         total = sum(st.steps for st in stages)
         stages = [dataclasses.replace(st, steps=max(1, round(st.steps * iters / total))) for st in stages]
@@ -194,6 +214,7 @@ def fit_frame(
     search). config.time_limit_s bounds the search and the polish (not marked interrupted);
     the separation always completes."""
     t0 = time.perf_counter()
+    config = dataclasses.replace(config, device=resolve_device(config.device))
     # torch.optim imports torch._dynamo on first use, for seconds; a Ctrl-C inside that import
     # would leave it half-done and break every optimiser after it. Import it before the search,
     # where an interrupt has nothing to lose.
@@ -325,7 +346,7 @@ def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1
 def _search(target, scene, n_hands, config, progress, deadline, extra_starts=None, anchor=None, stop=None):
     sides = ["right", "left"][:n_hands]
     problem = make_problem(target, scene, sides, config, anchor)
-    n_random, n_keep, stages = schedule(config.quality, config.iters, target.shape[0])
+    n_random, n_keep, stages = schedule(config.quality, config.iters, target.shape[0], config.device)
     rng = np.random.default_rng(config.seed)
     atlas = (
         load_atlas(config.hand_model, config.forearm, config.limits)

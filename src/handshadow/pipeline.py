@@ -23,7 +23,7 @@ from handshadow.export.images import mask_image, overlay_image, overlay_preview
 from handshadow.export.meshes import write_glb, write_obj
 from handshadow.export.pictures import performer_framing, performer_view, scene_picture
 from handshadow.export.plots import path_plot
-from handshadow.fit import FitConfig, FitResult, fit_frame, schedule
+from handshadow.fit import FitConfig, FitResult, fit_frame, resolve_device, schedule
 from handshadow.guide import describe, guide_image
 from handshadow.hands import load_hand
 from handshadow.hands.posed import PosedMesh, cast_shadow
@@ -127,7 +127,7 @@ def fit_to_folder(
     Returns (folder, FitResult, instruction lines)."""
     ResultFolder(out, force)  # refuse an unusable output folder before the work
     frame = resolve_target(target_source, config.size, config.size, invert)
-    _, _, stages = schedule(config.quality, config.iters, config.size)
+    _, _, stages = schedule(config.quality, config.iters, config.size, resolve_device(config.device))
     searches = 2 if config.hands == "auto" else 1  # fit_frame runs one search per hand count
     total = sum(s.steps for s in stages) * searches
     recorder = FrameRecorder(total, searches)
