@@ -9,13 +9,14 @@
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from handshadow.render.shadow import MeshTopology, shadow_mask
 from handshadow.render.soft import gaussian_blur
 from handshadow.scene import Scene
 
-__all__ = ["MeshTopology", "ShadowRenderer", "gaussian_blur", "merge_meshes", "shadow_mask"]
+__all__ = ["MeshTopology", "ShadowRenderer", "gaussian_blur", "merge_meshes", "mesh_shadow", "shadow_mask"]
 
 
 def merge_meshes(vertices: list[torch.Tensor], faces: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
@@ -24,6 +25,17 @@ def merge_meshes(vertices: list[torch.Tensor], faces: list[torch.Tensor]) -> tup
     for v in vertices[:-1]:
         offsets.append(offsets[-1] + v.shape[1])
     return torch.cat(vertices, 1), torch.cat([f + o for f, o in zip(faces, offsets)])
+
+
+def mesh_shadow(scene: Scene, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(H, W) bool exact shadow of one closed mesh: vertices (V, 3) and faces (F, 3) as numpy
+    arrays in the scene's units, projected in float64. No gradient."""
+    points = torch.as_tensor(np.asarray(vertices, dtype=np.float64))[None]
+    topology = MeshTopology.from_faces(torch.as_tensor(np.asarray(faces, dtype=np.int64)))
+    with torch.no_grad():
+        xy, _ = scene.project(points)
+        mask = shadow_mask(xy, topology, scene.image.height, scene.image.width)
+    return mask[0].numpy() > 0.5
 
 
 class ShadowRenderer:
