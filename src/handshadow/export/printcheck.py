@@ -108,3 +108,56 @@ def _cover(tri: np.ndarray, height: int, width: int, chunk: int = 20000) -> np.n
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+
+
+def crossing_edges(vertices: np.ndarray, faces: np.ndarray, tolerance: float = 1e-3) -> int:
+    """How many edges of a triangle mesh pass through a triangle they do not belong to, by
+    more than ``tolerance`` (mesh units) on both sides and inside it: 0 for a surface that
+    does not cross itself (what a slicer needs), hundreds for a posed hand's raw skin. The
+    tolerance ignores the rounding of an STL's 32-bit coordinates."""
+    from scipy.spatial import cKDTree
+
+    v, f = np.asarray(vertices, float), np.asarray(faces, np.int64)
+    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1), axis=0)
+    tri = v[f]
+    centre = tri.mean(1)
+    reach = np.linalg.norm(tri - centre[:, None], axis=2).max(1)
+    mid = v[edges].mean(1)
+    half = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1) / 2
+    # Candidate (edge, triangle) pairs by bounding spheres; edges and triangles bucketed by
+    # size so a few large ones (a print's board) do not widen every search.
+    edge_bucket = np.floor(np.log2(np.maximum(half, 1e-12))).astype(int)
+    tri_bucket = np.floor(np.log2(np.maximum(reach, 1e-12))).astype(int)
+    pairs_e, pairs_t = [], []
+    for ke in np.unique(edge_bucket):
+        e_members = np.flatnonzero(edge_bucket == ke)
+        e_tree = cKDTree(mid[e_members])
+        for kt in np.unique(tri_bucket):
+            t_members = np.flatnonzero(tri_bucket == kt)
+            near = e_tree.sparse_distance_matrix(
+                cKDTree(centre[t_members]), half[e_members].max() + reach[t_members].max(), output_type="ndarray"
+            )
+            e, t = e_members[near["i"]], t_members[near["j"]]
+            close = near["v"] <= half[e] + reach[t]
+            pairs_e.append(e[close])
+            pairs_t.append(t[close])
+    e, t = np.concatenate(pairs_e), np.concatenate(pairs_t)
+    lo, hi = tri.min(1), tri.max(1)
+    e_lo, e_hi = np.minimum(v[edges[:, 0]], v[edges[:, 1]]), np.maximum(v[edges[:, 0]], v[edges[:, 1]])
+    keep = (e_lo[e] <= hi[t]).all(1) & (e_hi[e] >= lo[t]).all(1)
+    keep &= (f[t] != edges[e, 0:1]).all(1) & (f[t] != edges[e, 1:2]).all(1)
+    e, t = e[keep], t[keep]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area2 = np.linalg.norm(normal, axis=1)
+    unit = normal / np.maximum(area2, 1e-300)[:, None]
+    d0 = ((v[edges[e, 0]] - tri[t, 0]) * unit[t]).sum(1)
+    d1 = ((v[edges[e, 1]] - tri[t, 0]) * unit[t]).sum(1)
+    crosses = (d0 * d1 < 0) & (np.minimum(abs(d0), abs(d1)) > tolerance) & (area2[t] > 0)
+    e, t, d0, d1 = e[crosses], t[crosses], d0[crosses], d1[crosses]
+    p0, p1 = v[edges[e, 0]], v[edges[e, 1]]
+    x = p0 + (d0 / (d0 - d1))[:, None] * (p1 - p0)
+    inside = np.ones(len(e), bool)
+    for i, j in ((0, 1), (1, 2), (2, 0)):  # distance inside each edge line, within the plane
+        side = np.cross(unit[t], tri[t, j] - tri[t, i])
+        inside &= ((x - tri[t, i]) * side).sum(1) / np.maximum(np.linalg.norm(side, axis=1), 1e-300) > tolerance
+    return len(np.unique(e[inside]))

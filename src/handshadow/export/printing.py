@@ -286,12 +286,14 @@ def build_print(result: ResultMeshes, settings: PrintSettings) -> PrintModel:
                 f" print at --height-mm {smallest_height(settings, thinnest):.0f} or more"
             )
         hands = thick
+    hands = solids.tidy(hands)
     shadow = mesh_shadow(scene, *solids.to_arrays(hands))
     rods, foot_length, stand = (), 0.0, None
     if settings.stand:
         rods, foot_length, stand = _stand(scene, hands, shadow, settings.stand_size)
+    whole = hands if stand is None else solids.tidy(m3.Manifold.batch_boolean([hands, stand], m3.OpType.Add))
     return PrintModel(
-        solid=hands if stand is None else m3.Manifold.batch_boolean([hands, stand], m3.OpType.Add),
+        solid=solids.in_float32(whole),
         hands=hands,
         stand=stand,
         scene=scene,
@@ -454,21 +456,31 @@ def print_result(
     if min_wall_mm <= 0:
         raise PrintError(f"--min-wall-mm must be positive, got {min_wall_mm:g}")
     settings = PrintSettings(height_mm=float(height_mm), stand=stand, min_wall_mm=float(min_wall_mm))
-    meshes, sidecar = output_paths(Path(result_dir), out)
+    paths = output_paths(Path(result_dir), out)
     result = load_result(result_dir)
     model = build_print(result, settings)
-    vertices, faces = check_printable(model, settings)
+    return save_print(model, result, settings, paths, started)
+
+
+def save_print(
+    model: PrintModel,
+    result: ResultMeshes,
+    settings: PrintSettings,
+    paths: tuple[list[Path], tuple[Path, Path]],
+    started: float | None = None,
+) -> PrintReport:
+    """Check the print, write its files (paths: from :func:`output_paths`) and report."""
+    from handshadow.export.printsheet import instructions
     from handshadow.render import mesh_shadow
 
+    meshes, sidecar = paths
+    vertices, faces = check_printable(model, settings)
     wall_z = float(model.scene.wall.point[2])
     cast = mesh_shadow(model.scene, *solids.to_arrays(model.solid.trim_by_plane((0.0, 0.0, 1.0), wall_z + 1e-6)))
     facts = sheet_facts(model, settings)
-    picture = _picture(model, cast, facts)
     data = print_json(model, settings, result, meshes[0].name, len(faces))
-    files = write_print(vertices, faces, data, picture, meshes, sidecar)
+    files = write_print(vertices, faces, data, _picture(model, cast, facts), meshes, sidecar)
     size = np.ptp(vertices, axis=0)
-    from handshadow.export.printsheet import instructions
-
     return PrintReport(
         files=tuple(files),
         height_mm=settings.height_mm,
@@ -485,7 +497,7 @@ def print_result(
         lamp_to_wall_mm=float(model.scene.light.position[2]) - wall_z,
         shadow_iou=None if result.shadow is None else iou(cast, result.shadow),
         instructions=tuple(instructions(facts)),
-        seconds=time.perf_counter() - started,
+        seconds=time.perf_counter() - (started if started is not None else time.perf_counter()),
     )
 
 
@@ -513,12 +525,14 @@ def can_write_3mf() -> bool:
 
 def check_printable(model: PrintModel, settings: PrintSettings) -> tuple[np.ndarray, np.ndarray]:
     """The print's vertices (V, 3) and faces (F, 3) after checking that it is a watertight,
-    consistently wound solid of positive volume, in one piece when it has a stand."""
+    consistently wound solid of positive volume with no flat triangle, also in the 32-bit
+    coordinates an STL stores, and in one piece when it has a stand."""
     import trimesh
 
     vertices, faces = solids.to_arrays(model.solid)
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    if model.solid.status() != m3.Error.NoError or not (mesh.is_watertight and mesh.is_winding_consistent):
+    stored = trimesh.Trimesh(vertices.astype(np.float32).astype(np.float64), faces, process=False)  # as in the STL
+    closed = stored.is_watertight and stored.is_winding_consistent and stored.volume > 0
+    if model.solid.status() != m3.Error.NoError or not closed or not (stored.area_faces > 0).all():
         raise PrintError("the united solid is not watertight (a bug: please report it with the result folder)")
     pieces = len(solids.parts(model.solid))
     if settings.stand and pieces != 1:

@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 SHELL_MM = 0.02  # growth of the skin while uniting its fans (well below any printer's resolution)
+TIDY_MM = 0.01  # slivers below this are collapsed (a hundredth of a printer's finest line)
 PART_NEIGHBOURS = 16  # a part is thin when so many vertices around are thin too
 _OCTAHEDRON = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
 
@@ -95,6 +96,23 @@ def fill(solid: m3.Manifold) -> m3.Manifold:
             continue
         kept.append(s)
     return m3.Manifold.batch_boolean(kept, m3.OpType.Add) if len(kept) != 1 else kept[0]
+
+
+def tidy(solid: m3.Manifold, tolerance: float = TIDY_MM) -> m3.Manifold:
+    """The solid with edges shorter and triangles thinner than ``tolerance`` collapsed (a
+    union of many small pieces leaves slivers that 32-bit STL coordinates would flatten into
+    holes); the surface moves by at most the tolerance."""
+    return solid.as_original().simplify(tolerance)
+
+
+def in_float32(solid: m3.Manifold) -> m3.Manifold:
+    """The solid with its vertices rounded to the 32-bit floats an STL stores; manifold3d
+    collapses the few triangles the rounding flattens, so the file holds exactly this mesh."""
+    vertices, faces = to_arrays(solid)
+    rounded = m3.Manifold(m3.Mesh(vert_properties=vertices.astype(np.float32), tri_verts=faces.astype(np.uint32)))
+    if rounded.status() != m3.Error.NoError:
+        raise ValueError(f"rounding to 32-bit floats broke the solid ({rounded.status().name})")
+    return rounded
 
 
 def parts(solid: m3.Manifold) -> list[m3.Manifold]:
