@@ -59,12 +59,16 @@ class PrintError(HandshadowError):
 @dataclasses.dataclass(frozen=True)
 class PrintSettings:
     """height_mm: the whole print's height (stand included); stand: add the board, foot and
-    rods; min_wall_mm: the thinnest part the printer makes; stand_size: the stand's sizes."""
+    rods; min_wall_mm: the thinnest part the printer makes."""
 
     height_mm: float = 150.0
     stand: bool = True
     min_wall_mm: float = 1.2
-    stand_size: stands.StandSize = stands.StandSize()
+
+    @property
+    def stand_size(self) -> stands.StandSize:
+        """The stand's sizes for this height."""
+        return stands.StandSize.for_height(self.height_mm)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -240,11 +244,11 @@ def print_frame(scene: Scene, vertices: np.ndarray, settings: PrintSettings) -> 
 class PrintModel:
     """The print, millimetres, print frame.
 
-    solid: the whole print (one volume with the stand); hands: the hands alone as printed
-    (thickened); stand: board, foot and rods alone (None without a stand); scene: lamp, wall and frame in print coordinates; frame: scene -> print;
-    rods: the stand's rods (empty without a stand); foot_length_mm: 0 without a stand;
-    thinnest_mm: the thinnest part of the hands before thickening; thickened_balls: how
-    many balls thickened thin parts; thin_points: (K, 3) where parts were thin.
+    solid: the whole print, ready to write (one volume with a stand); hands: the hands alone
+    as printed (thickened); stand: board, foot and rods alone (None without a stand); scene:
+    lamp, wall and frame in print coordinates; frame: scene -> print; rods: the stand's rods;
+    foot_length_mm: 0 without a stand; thinnest_mm: the hands' thinnest part before
+    thickening; thickened: (K, 3) centres of the balls that thickened thin parts.
     """
 
     solid: m3.Manifold
@@ -255,8 +259,7 @@ class PrintModel:
     rods: tuple[stands.Rod, ...]
     foot_length_mm: float
     thinnest_mm: float
-    thickened_balls: int
-    thin_points: np.ndarray
+    thickened: np.ndarray
 
 
 class ThinPartsError(PrintError):
@@ -267,31 +270,13 @@ def build_print(result: ResultMeshes, settings: PrintSettings) -> PrintModel:
     """Unite, measure, thicken and stand the hands of a result (see the module docstring)."""
     from handshadow.render import mesh_shadow
 
-    all_vertices = np.concatenate([v for _, v, _ in result.meshes])
-    frame = print_frame(result.scene, all_vertices, settings)
+    frame = print_frame(result.scene, np.concatenate([v for _, v, _ in result.meshes]), settings)
     scene = frame.scene(result.scene)
-    hands = solids.clean_solid([(frame.apply(v), f) for _, v, f in result.meshes])
-    thickness = solids.local_thickness(hands, settings.min_wall_mm, max_depth=10 * settings.min_wall_mm + 20)
-    thinnest = float(thickness.part.min())
-    centres = solids.thickening_balls(thickness, settings.min_wall_mm)
-    if len(centres):
-        thick = m3.Manifold.batch_boolean([hands, *solids.balls(centres, settings.min_wall_mm / 2)], m3.OpType.Add)
-        before, after = mesh_shadow(scene, *solids.to_arrays(hands)), mesh_shadow(scene, *solids.to_arrays(thick))
-        change = iou(before, after)
-        if change < THICKEN_IOU_MIN:
-            where = ", ".join(name_places(result, frame, centres)) or f"{len(centres)} spots"
-            raise ThinPartsError(
-                f"thinner than {settings.min_wall_mm:g} mm at {settings.height_mm:g} mm tall: {where}"
-                f" (thinnest {thinnest:.2f} mm); thickening them would change the shadow (IoU {change:.3f});"
-                f" print at --height-mm {smallest_height(settings, thinnest):.0f} or more"
-            )
-        hands = thick
-    hands = solids.tidy(hands)
-    shadow = mesh_shadow(scene, *solids.to_arrays(hands))
-    rods, foot_length, stand = (), 0.0, None
+    hands, thinnest, thickened = printable_hands(result, frame, scene, settings)
+    rods, foot_length, stand, whole = (), 0.0, None, hands
     if settings.stand:
-        rods, foot_length, stand = _stand(scene, hands, shadow, settings.stand_size)
-    whole = hands if stand is None else solids.tidy(m3.Manifold.batch_boolean([hands, stand], m3.OpType.Add))
+        rods, foot_length, stand = _stand(scene, hands, mesh_shadow(scene, *solids.to_arrays(hands)), settings.stand_size)
+        whole = solids.tidy(m3.Manifold.batch_boolean([hands, stand], m3.OpType.Add))
     return PrintModel(
         solid=solids.in_float32(whole),
         hands=hands,
@@ -301,9 +286,36 @@ def build_print(result: ResultMeshes, settings: PrintSettings) -> PrintModel:
         rods=tuple(rods),
         foot_length_mm=foot_length,
         thinnest_mm=thinnest,
-        thickened_balls=len(centres),
-        thin_points=centres,
+        thickened=thickened,
     )
+
+
+def printable_hands(
+    result: ResultMeshes, frame: PrintFrame, scene: Scene, settings: PrintSettings
+) -> tuple[m3.Manifold, float, np.ndarray]:
+    """The hands as one clean solid in print millimetres, thickened where thinner than the
+    minimum wall; also the thinnest part before thickening (mm) and the thickening balls'
+    centres (K, 3). Raises ThinPartsError, naming the parts and the smallest height that
+    needs no thickening, when thickening would change the hands' shadow by more than
+    THICKEN_IOU_MIN."""
+    from handshadow.render import mesh_shadow
+
+    hands = solids.clean_solid([(frame.apply(v), f) for _, v, f in result.meshes])
+    thickness = solids.local_thickness(hands, settings.min_wall_mm, max_depth=10 * settings.min_wall_mm + 20)
+    thinnest = float(thickness.part.min())
+    centres = solids.thickening_balls(thickness, settings.min_wall_mm)
+    if len(centres):
+        thick = m3.Manifold.batch_boolean([hands, *solids.balls(centres, settings.min_wall_mm / 2)], m3.OpType.Add)
+        change = iou(mesh_shadow(scene, *solids.to_arrays(hands)), mesh_shadow(scene, *solids.to_arrays(thick)))
+        if change < THICKEN_IOU_MIN:
+            where = ", ".join(name_places(result, frame, centres)) or f"{len(centres)} spots"
+            raise ThinPartsError(
+                f"thinner than {settings.min_wall_mm:g} mm at {settings.height_mm:g} mm tall: {where}"
+                f" (thinnest {thinnest:.2f} mm); thickening them would change the shadow (IoU {change:.3f});"
+                f" print at --height-mm {smallest_height(settings, thinnest):.0f} or more"
+            )
+        hands = thick
+    return solids.tidy(hands), thinnest, centres
 
 
 def name_places(result: ResultMeshes, frame: PrintFrame, points: np.ndarray) -> list[str]:
@@ -313,6 +325,8 @@ def name_places(result: ResultMeshes, frame: PrintFrame, points: np.ndarray) -> 
     from handshadow.hands.rig import FINGERS
     from handshadow.posefile import load_pose_file
 
+    if len(points) == 0:
+        return []
     try:
         pose_set = load_pose_file(result.folder / "pose.json")
         keypoints = {h.side: frame.apply(_keypoints(h, pose_set.forearm)) for h in pose_set.hands}
@@ -372,7 +386,7 @@ def _stand(
 
     parts = solids.parts(hands)
     try:
-        candidates = stands.choose_rods(scene, parts, shadow, board_z=size.board)
+        candidates = stands.choose_rods(scene, parts, shadow, size)
     except stands.StandError as exc:
         raise PrintError(f"no hidden stand: {exc}; print with --no-stand") from None
     rods = [r for r in candidates if stands.hidden(mesh_shadow(scene, *solids.to_arrays(stands.rod_solid(r, size.board))), shadow)]
@@ -477,21 +491,20 @@ def save_print(
     vertices, faces = check_printable(model, settings)
     wall_z = float(model.scene.wall.point[2])
     cast = mesh_shadow(model.scene, *solids.to_arrays(model.solid.trim_by_plane((0.0, 0.0, 1.0), wall_z + 1e-6)))
-    facts = sheet_facts(model, settings)
+    facts = sheet_facts(model, settings, vertices, name_places(result, model.frame, model.thickened))
     data = print_json(model, settings, result, meshes[0].name, len(faces))
     files = write_print(vertices, faces, data, _picture(model, cast, facts), meshes, sidecar)
-    size = np.ptp(vertices, axis=0)
     return PrintReport(
         files=tuple(files),
         height_mm=settings.height_mm,
-        size_mm=(float(size[0]), float(size[1]), float(size[2])),
+        size_mm=facts.size_mm,
         life_scale=model.frame.mm_per_m / 1000.0,
         triangles=len(faces),
         watertight=True,
         volumes=len(solids.parts(model.solid)),
         thinnest_mm=model.thinnest_mm,
         min_wall_mm=settings.min_wall_mm,
-        thickened_spots=model.thickened_balls,
+        thickened_spots=len(model.thickened),
         rods=len(model.rods),
         lamp_mm=tuple(float(a) for a in model.scene.light.position),
         lamp_to_wall_mm=float(model.scene.light.position[2]) - wall_z,
@@ -540,7 +553,8 @@ def check_printable(model: PrintModel, settings: PrintSettings) -> tuple[np.ndar
     return vertices, faces
 
 
-def sheet_facts(model: PrintModel, settings: PrintSettings):
+def sheet_facts(model: PrintModel, settings: PrintSettings, vertices: np.ndarray, thickened_parts: list[str]):
+    """What print.png and the command state (vertices: (V, 3) the print's, mm)."""
     from handshadow.export.printsheet import SheetFacts
 
     o, u, v = (np.asarray(a, float) for a in (model.scene.image.origin, model.scene.image.u, model.scene.image.v))
@@ -553,8 +567,11 @@ def sheet_facts(model: PrintModel, settings: PrintSettings):
         life_scale=model.frame.mm_per_m / 1000.0,
         min_wall_mm=settings.min_wall_mm,
         thinnest_mm=model.thinnest_mm,
-        thickened=model.thickened_balls,
+        thickened=len(model.thickened),
         stand=settings.stand,
+        foot_mm=(model.foot_length_mm, settings.stand_size.board if settings.stand else 0.0),
+        size_mm=tuple(float(a) for a in np.ptp(vertices, axis=0)),
+        thickened_parts=tuple(thickened_parts),
     )
 
 
@@ -610,7 +627,7 @@ def print_json(model: PrintModel, settings: PrintSettings, result: ResultMeshes,
         "thickness": {
             "min_wall_mm": settings.min_wall_mm,
             "thinnest_mm": model.thinnest_mm,
-            "thickened_spots": model.thickened_balls,
+            "thickened_spots": len(model.thickened),
         },
         "result": {"scene": "scene.json", "meshes": [name for name, _, _ in result.meshes]},
     }

@@ -25,7 +25,8 @@ class SheetFacts:
     board's back toward the lamp). lamp: (3,) position; wall_z: the board's front face;
     frame: (x0, x1, y0, y1) of the picture on the board; height_mm; life_scale: print length
     per real length; min_wall_mm; thinnest_mm; thickened: spots thickened; stand: whether
-    there is one."""
+    there is one; foot_mm: (length, thickness) of the foot, zeros without a stand; size_mm:
+    (x, y, z) extent of the print; thickened_parts: names of the parts thickened."""
 
     lamp: np.ndarray
     wall_z: float
@@ -36,6 +37,9 @@ class SheetFacts:
     thinnest_mm: float
     thickened: int
     stand: bool
+    foot_mm: tuple[float, float] = (0.0, 0.0)
+    size_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    thickened_parts: tuple[str, ...] = ()
 
 
 def instructions(f: SheetFacts) -> list[str]:
@@ -49,9 +53,10 @@ def instructions(f: SheetFacts) -> list[str]:
         "Up is up as drawn: the board stands on its foot, the hands reach toward the torch."
         if f.stand
         else f"Up: the side that was highest in the fit; the hands hang {lamp_z - f.wall_z:.0f} mm from the torch's wall.",
-        f"Size: {f.height_mm:.0f} mm tall, {f.life_scale:.3f} x life size (1:{1 / f.life_scale:.1f}).",
+        f"Size: {f.height_mm:.0f} mm tall, {f.life_scale:.3f} x life size (1:{1 / f.life_scale:.1f});"
+        f" on the bed {f.size_mm[0]:.0f} x {f.size_mm[1]:.0f} mm and {f.size_mm[2]:.0f} mm high.",
         f"Thinnest part {f.thinnest_mm:.1f} mm (minimum wall {f.min_wall_mm:g} mm"
-        + (f"; {f.thickened} thin spots thickened)." if f.thickened else ")."),
+        + (f"; thickened to it: {', '.join(f.thickened_parts) or f'{f.thickened} spots'})." if f.thickened else ")."),
     ]
     if f.stand:
         lines.append("Print it lying on its back (as the file lies): board on the bed, supports for the hands.")
@@ -88,8 +93,8 @@ def _render(hands, stand, shadow, facts: SheetFacts, size: int) -> np.ndarray:
     lo, hi = points.min(0), points.max(0)
     centre = 0.5 * (lo + hi)
     reach = float(np.linalg.norm(hi - lo))
-    eye = centre + reach * np.array([0.75, 0.45, 1.05])
-    camera = Camera(tuple(eye), tuple(centre), (0.0, 1.0, 0.0), fov_deg=38.0, width=size, height=size)
+    eye = centre + reach * np.array([0.6, 0.35, 1.05])
+    camera = Camera(tuple(eye), tuple(centre), (0.0, 1.0, 0.0), fov_deg=36.0, width=size, height=size)
     return render_view(meshes, camera, background=(1.0, 1.0, 1.0), supersample=2)
 
 
@@ -113,7 +118,7 @@ def _sheet(view: np.ndarray, hand_points: np.ndarray, f: SheetFacts) -> np.ndarr
         text.text(0.0, 1.0 - i * 0.17, line, fontsize=10.5, va="top", family="DejaVu Sans",
                   weight="bold" if i == 0 else "normal", transform=text.transAxes)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", facecolor="white")
+    fig.savefig(buf, format="png", facecolor="white", bbox_inches="tight", pad_inches=0.15)
     plt.close(fig)
     return iio.imread(buf.getvalue())[..., :3]
 
@@ -125,7 +130,8 @@ def _side_view(ax, hand_points: np.ndarray, f: SheetFacts) -> None:
     ax.axhline(0, color="#8a7356", lw=3)
     ax.fill_between([-0.08 * lamp_z, 1.12 * lamp_z], -0.05 * f.height_mm, 0, color="#e9e1d4")
     if f.stand:
-        ax.add_patch(matplotlib_rect((0, 0), f.wall_z, y1, "#c7ccd6"))
+        ax.add_patch(_rect((0, 0), f.wall_z, y1, "#aab2c0"))
+        ax.add_patch(_rect((f.wall_z, 0), f.foot_mm[0], f.foot_mm[1], "#aab2c0"))
     else:
         ax.plot([f.wall_z, f.wall_z], [y0, y1], color="#888", lw=2)
     for y in (y0, y1):
@@ -146,7 +152,7 @@ def _side_view(ax, hand_points: np.ndarray, f: SheetFacts) -> None:
     ax.tick_params(labelsize=8)
 
 
-def matplotlib_rect(xy, width, height, color):
+def _rect(xy, width, height, color):
     from matplotlib.patches import Rectangle
 
     return Rectangle(xy, width, height, color=color)

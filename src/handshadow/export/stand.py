@@ -30,8 +30,6 @@ from scipy.ndimage import binary_dilation, distance_transform_edt
 
 from handshadow.scene import Scene
 
-ROD_MIN_MM = 1.0  # rod radius where it leaves a hand: smallest and largest
-ROD_MAX_MM = 3.0
 ROD_SEGMENTS = 24
 HIDE_MARGIN_PX = 1.5  # the disc a rod casts stays this far inside the hands' shadow
 RODS_PER_PART = 2
@@ -41,11 +39,25 @@ CANDIDATE_RAYS = 600
 @dataclasses.dataclass(frozen=True)
 class StandSize:
     """Sizes of the stand, millimetres. board: thickness of the board (and the foot); margin:
-    gap between the frame's bottom edge and the top of the foot; foot_min: shortest foot."""
+    gap between the frame's bottom edge and the top of the foot; foot_min: shortest foot;
+    mark: arms of the cross cut into the board where the torch points; rod_min, rod_max:
+    a rod's radius where it leaves a hand (it widens toward the board)."""
 
     board: float = 2.5
     margin: float = 3.0
     foot_min: float = 30.0
+    mark: float = 12.0
+    rod_min: float = 1.0
+    rod_max: float = 3.0
+
+    @staticmethod
+    def for_height(height_mm: float) -> StandSize:
+        """Sizes that suit a print of this height (the defaults at 150 mm); the thinnest
+        stay printable and stiff (a 2 mm board, 2 mm rods)."""
+        k = height_mm / 150.0
+        return StandSize(
+            board=max(2.0, 2.5 * k), foot_min=max(20.0, 30.0 * k), mark=max(6.0, 12.0 * k), rod_max=max(1.2, 3.0 * k)
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,12 +78,16 @@ class StandError(ValueError):
 
 
 def board_and_foot(scene: Scene, size: StandSize, foot_length: float) -> tuple[m3.Manifold, m3.Manifold]:
-    """The board (behind the wall plane, spanning the image frame from the table up) and the
-    foot (on the table in front of it). Assumes print coordinates (see the module docstring):
-    the wall is z = size.board facing +z, the frame's rectangle is axis-aligned in x and y,
-    and the table is y = 0."""
+    """The board (behind the wall plane, spanning the image frame from the table up, with a
+    shallow cross where the torch points) and the foot (on the table in front of it).
+    Assumes print coordinates (see the module docstring): the wall is z = size.board facing
+    +z, the frame's rectangle is axis-aligned in x and y, and the table is y = 0."""
     lo, hi = frame_box(scene)
     board = m3.Manifold.cube((hi[0] - lo[0], hi[1], size.board)).translate((lo[0], 0.0, 0.0))
+    aim = np.asarray(scene.wall.point, float)  # the lamp's foot
+    groove = (size.mark, 0.8, 1.2)  # length, width, depth * 2 (half of it cuts in)
+    for arm in (groove, (groove[1], groove[0], groove[2])):
+        board -= m3.Manifold.cube(arm, center=True).translate(tuple(aim))
     foot_top = lo[1] - size.margin
     foot = m3.Manifold.cube((hi[0] - lo[0], min(size.board, foot_top), foot_length + size.board / 2))
     return board, foot.translate((lo[0], 0.0, size.board / 2))
@@ -91,7 +107,7 @@ def wall_point(scene: Scene, row: np.ndarray, col: np.ndarray) -> np.ndarray:
     return o + ((col + 0.5) / im.width)[:, None] * u + ((row + 0.5) / im.height)[:, None] * v
 
 
-def choose_rods(scene: Scene, parts: list[m3.Manifold], shadow: np.ndarray, board_z: float) -> list[Rod]:
+def choose_rods(scene: Scene, parts: list[m3.Manifold], shadow: np.ndarray, size: StandSize) -> list[Rod]:
     """Up to RODS_PER_PART hidden rods for each part of the hands.
 
     Candidate rays run from the lamp through pixels deep inside the shadow (H, W) bool; along
@@ -103,7 +119,7 @@ def choose_rods(scene: Scene, parts: list[m3.Manifold], shadow: np.ndarray, boar
     lamp = np.asarray(scene.light.position, float)
     pixel = float(np.linalg.norm(scene.image.v)) / scene.image.height
     depth_px = distance_transform_edt(shadow) - HIDE_MARGIN_PX  # room for the disc, pixels
-    rows, cols = np.nonzero(depth_px * pixel >= ROD_MIN_MM)
+    rows, cols = np.nonzero(depth_px * pixel >= size.rod_min)
     if len(rows) > CANDIDATE_RAYS:
         pick = np.random.default_rng(0).choice(len(rows), CANDIDATE_RAYS, replace=False)
         rows, cols = rows[pick], cols[pick]
@@ -112,7 +128,7 @@ def choose_rods(scene: Scene, parts: list[m3.Manifold], shadow: np.ndarray, boar
     for index, part in enumerate(parts):
         found = []
         for target, room_px in zip(targets, depth_px[rows, cols]):
-            rod = _rod_through(part, index, lamp, target, room_px * pixel, board_z)
+            rod = _rod_through(part, index, lamp, target, room_px * pixel, size)
             if rod is not None:
                 found.append(rod)
         if not found:
@@ -122,7 +138,7 @@ def choose_rods(scene: Scene, parts: list[m3.Manifold], shadow: np.ndarray, boar
 
 
 def _rod_through(
-    part: m3.Manifold, index: int, lamp: np.ndarray, target: np.ndarray, room_mm: float, board_z: float
+    part: m3.Manifold, index: int, lamp: np.ndarray, target: np.ndarray, room_mm: float, size: StandSize
 ) -> Rod | None:
     """The rod along the ray lamp -> target (a wall point) that starts in the middle of the
     ray's longest stretch inside ``part``, or None. room_mm: radius of the disc the rod may
@@ -138,10 +154,10 @@ def _rod_through(
     cos_wall = abs(direction[2])
     start_t = 0.5 * (t[best, 0] + t[best, 1])
     # A cone with apex at the lamp casts a disc of radius r_start * length / distance.
-    radius = min(ROD_MAX_MM, 0.5 * stretch, room_mm * start_t * cos_wall**2)
-    if radius < ROD_MIN_MM:
+    radius = min(size.rod_max, 0.5 * stretch, room_mm * start_t * cos_wall**2)
+    if radius < size.rod_min:
         return None
-    end_t = 1.0 + (target[2] - board_z / 2) / (length * cos_wall)  # half-way into the board
+    end_t = 1.0 + (target[2] - size.board / 2) / (length * cos_wall)  # half-way into the board
     return Rod(
         start=lamp + start_t * (target - lamp),
         end=lamp + end_t * (target - lamp),
