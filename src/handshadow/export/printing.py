@@ -427,7 +427,6 @@ class PrintReport:
     size_mm: tuple[float, float, float]
     life_scale: float
     triangles: int
-    watertight: bool
     volumes: int
     thinnest_mm: float
     min_wall_mm: float
@@ -441,12 +440,10 @@ class PrintReport:
 
     def lines(self) -> list[str]:
         """A summary for people, one fact a line."""
-        w, h, d = self.size_mm
         out = [
             f"wrote {', '.join(str(p) for p in self.files)}",
-            f"{self.triangles} triangles, {'watertight' if self.watertight else 'NOT watertight'},"
-            f" {self.volumes} {'volume' if self.volumes == 1 else 'volumes'}, {w:.0f} x {h:.0f} x {d:.0f} mm"
-            f" (wide x tall x deep), {self.rods} hidden rods",
+            f"{self.triangles} triangles, watertight, {self.volumes} {'volume' if self.volumes == 1 else 'volumes'}"
+            + (f", {self.rods} rods hidden in the shadow" if self.rods else ""),
         ]
         if self.shadow_iou is not None:
             out.append(f"its shadow against shadow.png: IoU {self.shadow_iou:.3f}")
@@ -497,10 +494,9 @@ def save_print(
     return PrintReport(
         files=tuple(files),
         height_mm=settings.height_mm,
-        size_mm=facts.size_mm,
+        size_mm=tuple(float(a) for a in np.ptp(vertices, axis=0)),
         life_scale=model.frame.mm_per_m / 1000.0,
         triangles=len(faces),
-        watertight=True,
         volumes=len(solids.parts(model.solid)),
         thinnest_mm=model.thinnest_mm,
         min_wall_mm=settings.min_wall_mm,
@@ -570,7 +566,7 @@ def sheet_facts(model: PrintModel, settings: PrintSettings, vertices: np.ndarray
         thickened=len(model.thickened),
         stand=settings.stand,
         foot_mm=(model.foot_length_mm, settings.stand_size.board if settings.stand else 0.0),
-        size_mm=tuple(float(a) for a in np.ptp(vertices, axis=0)),
+        bounds_mm=np.stack([vertices.min(0), vertices.max(0)]),
         thickened_parts=tuple(thickened_parts),
     )
 

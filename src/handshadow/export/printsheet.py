@@ -1,8 +1,8 @@
 """print.png: the print on its stand, and a sheet that says where the torch goes.
 
 Left: the print rendered as it stands on a table, its board showing the shadow it will catch.
-Right: a side view and a view from above with the torch's place measured in millimetres, and
-the lines a person needs (how far, how high, which way is up, how to print it).
+Right: a side view with the torch's place measured in millimetres, and the lines a person
+needs (how far, how high, which way is up, how big, how to print it).
 """
 
 from __future__ import annotations
@@ -25,8 +25,9 @@ class SheetFacts:
     board's back toward the lamp). lamp: (3,) position; wall_z: the board's front face;
     frame: (x0, x1, y0, y1) of the picture on the board; height_mm; life_scale: print length
     per real length; min_wall_mm; thinnest_mm; thickened: spots thickened; stand: whether
-    there is one; foot_mm: (length, thickness) of the foot, zeros without a stand; size_mm:
-    (x, y, z) extent of the print; thickened_parts: names of the parts thickened."""
+    there is one; foot_mm: (length, thickness) of the foot, zeros without a stand; bounds_mm:
+    (2, 3) lowest and highest corner of the print; thickened_parts: names of the parts
+    thickened."""
 
     lamp: np.ndarray
     wall_z: float
@@ -38,7 +39,7 @@ class SheetFacts:
     thickened: int
     stand: bool
     foot_mm: tuple[float, float] = (0.0, 0.0)
-    size_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    bounds_mm: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((2, 3)))
     thickened_parts: tuple[str, ...] = ()
 
 
@@ -46,21 +47,28 @@ def instructions(f: SheetFacts) -> list[str]:
     """The sheet's lines, plain text (also printed by the command line)."""
     lamp_x, lamp_y, lamp_z = f.lamp
     side = "centred" if abs(lamp_x) < 0.5 else f"{abs(lamp_x):.0f} mm {'right' if lamp_x > 0 else 'left'} of centre"
-    wall = "the board" if f.stand else "the wall"
-    lines = [
-        f"Torch: {lamp_z - f.wall_z:.0f} mm in front of {wall}, {lamp_y:.0f} mm above the table, {side},",
-        f"  pointing at {wall}; a small bare LED gives the sharpest shadow. Dark room.",
-        "Up is up as drawn: the board stands on its foot, the hands reach toward the torch."
-        if f.stand
-        else f"Up: the side that was highest in the fit; the hands hang {lamp_z - f.wall_z:.0f} mm from the torch's wall.",
+    size = f.bounds_mm[1] - f.bounds_mm[0]
+    if f.stand:
+        place = [
+            f"Torch: {lamp_z - f.wall_z:.0f} mm in front of the board, {lamp_y:.0f} mm above the table, {side},",
+            "  pointing at the cross on the board; a small bare LED gives the sharpest shadow. Dark room.",
+            "Up is up as drawn: the board stands on its foot, the hands reach toward the torch.",
+        ]
+    else:
+        place = [
+            f"Torch: {lamp_z - f.wall_z:.0f} mm in front of the wall, pointing at it. Hold the print upright,",
+            f"  its lowest point {lamp_y:.0f} mm below the torch, its back {f.bounds_mm[0][2] - f.wall_z:.0f} mm"
+            " from the wall (print.json has the exact place).",
+        ]
+    return place + [
         f"Size: {f.height_mm:.0f} mm tall, {f.life_scale:.3f} x life size (1:{1 / f.life_scale:.1f});"
-        f" on the bed {f.size_mm[0]:.0f} x {f.size_mm[1]:.0f} mm and {f.size_mm[2]:.0f} mm high.",
+        f" {size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm (wide, tall, deep).",
         f"Thinnest part {f.thinnest_mm:.1f} mm (minimum wall {f.min_wall_mm:g} mm"
         + (f"; thickened to it: {', '.join(f.thickened_parts) or f'{f.thickened} spots'})." if f.thickened else ")."),
+        "Print it lying on its back as the file lies (the board on the bed), with supports for the hands."
+        if f.stand
+        else "Print it with supports; it is not one piece if the hands do not touch.",
     ]
-    if f.stand:
-        lines.append("Print it lying on its back (as the file lies): board on the bed, supports for the hands.")
-    return lines
 
 
 def print_picture(
@@ -115,8 +123,8 @@ def _sheet(view: np.ndarray, hand_points: np.ndarray, f: SheetFacts) -> np.ndarr
     text = fig.add_subplot(grid[1, 1])
     text.set_axis_off()
     for i, line in enumerate(instructions(f)):
-        text.text(0.0, 1.0 - i * 0.17, line, fontsize=10.5, va="top", family="DejaVu Sans",
-                  weight="bold" if i == 0 else "normal", transform=text.transAxes)
+        weight = "bold" if i == 0 else "normal"
+        text.text(0.0, 1.0 - i * 0.17, line, fontsize=10.5, va="top", weight=weight, transform=text.transAxes)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", facecolor="white", bbox_inches="tight", pad_inches=0.15)
     plt.close(fig)
@@ -124,12 +132,14 @@ def _sheet(view: np.ndarray, hand_points: np.ndarray, f: SheetFacts) -> np.ndarr
 
 
 def _side_view(ax, hand_points: np.ndarray, f: SheetFacts) -> None:
-    """Seen from the side: table, board, hands, torch, the picture's extreme rays, distances."""
+    """Seen from the side: table, board and foot (or the wall), the hands, the torch, the
+    picture's extreme rays, and the distances the sheet states."""
     lamp_y, lamp_z = f.lamp[1], f.lamp[2]
     _, _, y0, y1 = f.frame
-    ax.axhline(0, color="#8a7356", lw=3)
-    ax.fill_between([-0.08 * lamp_z, 1.12 * lamp_z], -0.05 * f.height_mm, 0, color="#e9e1d4")
+    low, high = min(0.0, y0), max(y1, f.height_mm)
     if f.stand:
+        ax.axhline(0, color="#8a7356", lw=3)
+        ax.fill_between([-0.08 * lamp_z, 1.15 * lamp_z], -0.05 * f.height_mm, 0, color="#e9e1d4")
         ax.add_patch(_rect((0, 0), f.wall_z, y1, "#aab2c0"))
         ax.add_patch(_rect((f.wall_z, 0), f.foot_mm[0], f.foot_mm[1], "#aab2c0"))
     else:
@@ -139,15 +149,17 @@ def _side_view(ax, hand_points: np.ndarray, f: SheetFacts) -> None:
     ax.scatter(hand_points[::7, 2], hand_points[::7, 1], s=1, color=np.asarray(SKIN) * 0.85)
     ax.plot(lamp_z, lamp_y, marker="*", ms=16, color="#f2a900", mec="#8a5a00")
     ax.annotate("torch", (lamp_z, lamp_y), xytext=(6, 8), textcoords="offset points", fontsize=10)
-    _dimension(ax, (f.wall_z, lamp_z), (-0.12 * f.height_mm,) * 2, f"{lamp_z - f.wall_z:.0f} mm to the board" if f.stand else f"{lamp_z - f.wall_z:.0f} mm to the wall")
-    _dimension(ax, (lamp_z + 0.05 * lamp_z,) * 2, (0, lamp_y), f"{lamp_y:.0f} mm")
+    wall = "board" if f.stand else "wall"
+    _dimension(ax, (f.wall_z, lamp_z), (low - 0.12 * f.height_mm,) * 2, f"{lamp_z - f.wall_z:.0f} mm to the {wall}")
+    _dimension(ax, (1.05 * lamp_z,) * 2, (0, lamp_y), f"{lamp_y:.0f} mm")
     ax.annotate("", xy=(0.03, 0.97), xytext=(0.03, 0.75), xycoords="axes fraction",
                 arrowprops=dict(arrowstyle="-|>", color="black", lw=1.5))
     ax.text(0.045, 0.86, "up", transform=ax.transAxes, fontsize=10)
     ax.set_aspect("equal")
     ax.set_xlim(-0.08 * lamp_z, 1.15 * lamp_z)
-    ax.set_ylim(-0.2 * f.height_mm, 1.08 * max(y1, f.height_mm))
-    ax.set_xlabel("mm from the back of the board" if f.stand else "mm from the wall")
+    ax.set_ylim(low - 0.2 * f.height_mm, 1.08 * high)
+    ax.set_xlabel(f"mm from the back of the {wall}" if f.stand else "mm from the wall")
+    ax.set_ylabel("mm above the table" if f.stand else "mm above the print's lowest point", fontsize=9)
     ax.set_title("from the side", fontsize=11)
     ax.tick_params(labelsize=8)
 
