@@ -44,8 +44,12 @@ def main() -> None:
     parser.add_argument("--targets", default=str(HSP), help="folder of the dev targets' images")
     parser.add_argument("--height-mm", type=float, default=150.0)
     args = parser.parse_args()
-    folders = [Path(r) for r in args.results] or [fitted(Path(args.targets) / f"{n}.png", Path(args.fits) / n) for n in DEV]
-    print(f"{'result':12s} {'watertight':>10s} {'cross':>5s} {'IoU':>6s} {'stand px':>8s} {'thin mm':>8s} {'thickened':>9s} {'triangles':>9s} {'s':>6s}")
+    folders = [Path(r) for r in args.results] or [
+        fitted(Path(args.targets) / f"{n}.png", Path(args.fits) / n) for n in DEV
+    ]
+    print(
+        f"{'result':12s} {'watertight':>10s} {'cross':>5s} {'IoU':>6s} {'stand px':>8s} {'thin mm':>8s} {'thickened':>9s} {'triangles':>9s} {'s':>6s}"
+    )
     rows = [measure(folder, args.height_mm) for folder in folders]
     n = len(rows)
     print(
@@ -74,7 +78,10 @@ def measure(folder: Path, height_mm: float) -> dict:
     stl = folder / "print.stl"
     mesh = trimesh.load(stl, force="mesh")
     watertight = bool(
-        mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0 and len(mesh.split(only_watertight=False)) == 1
+        mesh.is_watertight
+        and mesh.is_winding_consistent
+        and mesh.volume > 0
+        and len(mesh.split(only_watertight=False)) == 1
     )
     vertices, faces, info = printcheck.load_print(stl, folder / "print.json")
     cast = printcheck.cast_shadow(vertices, faces, info)

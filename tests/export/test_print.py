@@ -53,7 +53,9 @@ def test_print_is_one_watertight_volume_without_crossings(built):
     mesh = trimesh.load(stl, force="mesh")  # merges the STL's corners, as a slicer does
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
     assert len(mesh.split(only_watertight=False)) == 1
-    solid_ = m3.Manifold(m3.Mesh(vert_properties=np.asarray(mesh.vertices, np.float32), tri_verts=np.asarray(mesh.faces, np.uint32)))
+    solid_ = m3.Manifold(
+        m3.Mesh(vert_properties=np.asarray(mesh.vertices, np.float32), tri_verts=np.asarray(mesh.faces, np.uint32))
+    )
     assert solid_.status() == m3.Error.NoError and len(solid_.decompose()) == 1
     assert printcheck.crossing_edges(mesh.vertices, mesh.faces) == 0
     assert report.volumes == 1 and report.rods >= 2

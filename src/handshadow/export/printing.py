@@ -13,10 +13,15 @@ Steps, each in its own function:
    lamp and wall (in print.json) are the scene's, mapped the same way.
 3. :func:`build_print` unites the hands (:mod:`handshadow.export.solid`: a clean manifold even
    where skinning folds the skin or hands pass through each other), measures their thickness,
-   thickens parts thinner than the minimum wall (or refuses with the smallest height that
-   needs none), and adds the stand (:mod:`handshadow.export.stand`), checking with the exact
-   shadow renderer that no part of it casts a shadow in the frame.
-4. :func:`write_print` writes the STL (and 3MF), print.json and print.png, all or nothing.
+   thickens parts thinner than the minimum wall (or refuses, naming them, with the smallest
+   height that needs no thickening), and adds the stand (:mod:`handshadow.export.stand`),
+   checking with the exact shadow renderer that no part of it casts a shadow in the frame.
+4. :func:`save_print` checks the solid as an STL will store it and writes the STL (and 3MF),
+   print.json and print.png (:mod:`handshadow.export.printsheet`), all or nothing.
+
+Print coordinates (millimetres): x to the performer's right, y up with the table at y = 0, z
+from the back of the board toward the lamp; the board is the wall (its front face, z =
+board thickness). Without a stand y = 0 is the print's lowest point and z = 0 the wall.
 
 print.json::
 
@@ -24,15 +29,16 @@ print.json::
      "scene_to_print": {"matrix": 4 x 4, "mm_per_m": 181.2, "rotation": 3 x 3,
                         "translation_mm": [...]},          # p_mm = mm_per_m * R p_m + t
      "light": ..., "wall": ..., "image": ...,               # scene.json's contract, in mm
-     "lamp": {"height_above_table_mm", "distance_to_wall_mm", "right_of_centre_mm"},
-     "up": [0, 1, 0], "stand": {...}, "thickness": {...}, "mesh": {...}}
+     "lamp": {"position_mm", "height_mm", "height_above", "distance_to_wall_mm",
+              "right_of_centre_mm"},                     # where the torch goes
+     "up": [0, 1, 0], "stand": {"board_mm", "foot_length_mm", "rods": [...]} or null,
+     "thickness": {"min_wall_mm", "thinnest_mm", "thickened_spots"}, "mesh": {...}}
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import logging
 import time
 from pathlib import Path
 
@@ -44,8 +50,6 @@ from handshadow.export import solid as solids
 from handshadow.export import stand as stands
 from handshadow.metrics import iou
 from handshadow.scene import ImageFrame, Light, Scene, SceneError, Wall
-
-log = logging.getLogger(__name__)
 
 FORMAT = "handshadow.print/1"
 THICKEN_IOU_MIN = 0.99  # thickening may change the hands' own shadow at most this much
@@ -190,7 +194,11 @@ class PrintFrame:
             light=Light("point", position=tuple(self.apply(scene.light.position))),
             wall=Wall(point=tuple(self.apply(scene.wall.point)), normal=tuple(self.rotation @ scene.wall.normal)),
             image=ImageFrame(
-                im.width, im.height, tuple(self.apply(im.origin)), tuple(self.direction(im.u)), tuple(self.direction(im.v))
+                im.width,
+                im.height,
+                tuple(self.apply(im.origin)),
+                tuple(self.direction(im.u)),
+                tuple(self.direction(im.v)),
             ),
         )
 
@@ -275,7 +283,9 @@ def build_print(result: ResultMeshes, settings: PrintSettings) -> PrintModel:
     hands, thinnest, thickened = printable_hands(result, frame, scene, settings)
     rods, foot_length, stand, whole = (), 0.0, None, hands
     if settings.stand:
-        rods, foot_length, stand = _stand(scene, hands, mesh_shadow(scene, *solids.to_arrays(hands)), settings.stand_size)
+        rods, foot_length, stand = _stand(
+            scene, hands, mesh_shadow(scene, *solids.to_arrays(hands)), settings.stand_size
+        )
         whole = solids.tidy(m3.Manifold.batch_boolean([hands, stand], m3.OpType.Add))
     return PrintModel(
         solid=solids.in_float32(whole),
@@ -389,10 +399,16 @@ def _stand(
         candidates = stands.choose_rods(scene, parts, shadow, size)
     except stands.StandError as exc:
         raise PrintError(f"no hidden stand: {exc}; print with --no-stand") from None
-    rods = [r for r in candidates if stands.hidden(mesh_shadow(scene, *solids.to_arrays(stands.rod_solid(r, size.board))), shadow)]
+    rods = [
+        r
+        for r in candidates
+        if stands.hidden(mesh_shadow(scene, *solids.to_arrays(stands.rod_solid(r, size.board))), shadow)
+    ]
     missing = sorted(set(range(len(parts))) - {r.part for r in rods})
     if missing:
-        raise PrintError(f"no hidden stand: the rods for part {missing[0] + 1} of the hands would show; print with --no-stand")
+        raise PrintError(
+            f"no hidden stand: the rods for part {missing[0] + 1} of the hands would show; print with --no-stand"
+        )
     board, _ = stands.board_and_foot(scene, size, 0.0)
     rods_and_board = m3.Manifold.batch_boolean([board, *(stands.rod_solid(r) for r in rods)], m3.OpType.Add)
     foot_length = max(size.foot_min, 1.5 * (_centre_of_mass([hands, rods_and_board])[2] - size.board))
@@ -578,7 +594,9 @@ def _picture(model: PrintModel, shadow: np.ndarray, facts) -> np.ndarray:
     return print_picture(solids.to_arrays(model.hands), stand, shadow, facts)
 
 
-def print_json(model: PrintModel, settings: PrintSettings, result: ResultMeshes, mesh_name: str, triangles: int) -> dict:
+def print_json(
+    model: PrintModel, settings: PrintSettings, result: ResultMeshes, mesh_name: str, triangles: int
+) -> dict:
     """print.json's content (see the module docstring)."""
     frame, scene = model.frame, model.scene
     lamp = np.asarray(scene.light.position, float)
@@ -630,7 +648,12 @@ def print_json(model: PrintModel, settings: PrintSettings, result: ResultMeshes,
 
 
 def write_print(
-    vertices: np.ndarray, faces: np.ndarray, data: dict, picture: np.ndarray, meshes: list[Path], sidecar: tuple[Path, Path]
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    data: dict,
+    picture: np.ndarray,
+    meshes: list[Path],
+    sidecar: tuple[Path, Path],
 ) -> list[Path]:
     """Write the mesh files, print.json and print.png together (all or none)."""
     import trimesh

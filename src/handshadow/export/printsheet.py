@@ -152,8 +152,13 @@ def _side_view(ax, hand_points: np.ndarray, f: SheetFacts) -> None:
     wall = "board" if f.stand else "wall"
     _dimension(ax, (f.wall_z, lamp_z), (low - 0.12 * f.height_mm,) * 2, f"{lamp_z - f.wall_z:.0f} mm to the {wall}")
     _dimension(ax, (1.05 * lamp_z,) * 2, (0, lamp_y), f"{lamp_y:.0f} mm")
-    ax.annotate("", xy=(0.03, 0.97), xytext=(0.03, 0.75), xycoords="axes fraction",
-                arrowprops=dict(arrowstyle="-|>", color="black", lw=1.5))
+    ax.annotate(
+        "",
+        xy=(0.03, 0.97),
+        xytext=(0.03, 0.75),
+        xycoords="axes fraction",
+        arrowprops=dict(arrowstyle="-|>", color="black", lw=1.5),
+    )
     ax.text(0.045, 0.86, "up", transform=ax.transAxes, fontsize=10)
     ax.set_aspect("equal")
     ax.set_xlim(-0.08 * lamp_z, 1.15 * lamp_z)
@@ -172,5 +177,12 @@ def _rect(xy, width, height, color):
 
 def _dimension(ax, xs, ys, label: str) -> None:
     ax.annotate("", xy=(xs[1], ys[1]), xytext=(xs[0], ys[0]), arrowprops=dict(arrowstyle="<->", color="#333", lw=1))
-    ax.text(0.5 * (xs[0] + xs[1]), 0.5 * (ys[0] + ys[1]), " " + label, fontsize=9.5, va="center",
-            ha="center" if ys[0] == ys[1] else "left", bbox=dict(fc="white", ec="none", pad=1))
+    ax.text(
+        0.5 * (xs[0] + xs[1]),
+        0.5 * (ys[0] + ys[1]),
+        " " + label,
+        fontsize=9.5,
+        va="center",
+        ha="center" if ys[0] == ys[1] else "left",
+        bbox=dict(fc="white", ec="none", pad=1),
+    )
