@@ -226,8 +226,7 @@ def print_frame(scene: Scene, vertices: np.ndarray, settings: PrintSettings) -> 
     """
     rotation = print_rotation(scene)
     q = np.asarray(vertices, float) @ rotation.T
-    o, u, v = (np.asarray(a, float) for a in (scene.image.origin, scene.image.u, scene.image.v))
-    corners = np.stack([o, o + u, o + v, o + u + v]) @ rotation.T
+    corners = stands.frame_corners(scene) @ rotation.T
     wall_z = float(rotation[2] @ np.asarray(scene.wall.point, float))
     centre_x = float(corners[:, 0].mean())
     size = settings.stand_size
@@ -569,12 +568,11 @@ def sheet_facts(model: PrintModel, settings: PrintSettings, vertices: np.ndarray
     """What print.png and the command state (vertices: (V, 3) the print's, mm)."""
     from handshadow.export.printsheet import SheetFacts
 
-    o, u, v = (np.asarray(a, float) for a in (model.scene.image.origin, model.scene.image.u, model.scene.image.v))
-    corners = np.stack([o, o + u, o + v, o + u + v])
+    lo, hi = stands.frame_box(model.scene)
     return SheetFacts(
         lamp=np.asarray(model.scene.light.position, float),
         wall_z=float(model.scene.wall.point[2]),
-        frame=(corners[:, 0].min(), corners[:, 0].max(), corners[:, 1].min(), corners[:, 1].max()),
+        frame=(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])),
         height_mm=settings.height_mm,
         life_scale=model.frame.mm_per_m / 1000.0,
         min_wall_mm=settings.min_wall_mm,

@@ -93,18 +93,16 @@ def board_and_foot(scene: Scene, size: StandSize, foot_length: float) -> tuple[m
     return board, foot.translate((lo[0], 0.0, size.board / 2))
 
 
+def frame_corners(scene: Scene) -> np.ndarray:
+    """(4, 3) the image frame's corners on the wall."""
+    o, u, v = (np.asarray(a, float) for a in (scene.image.origin, scene.image.u, scene.image.v))
+    return np.stack([o, o + u, o + v, o + u + v])
+
+
 def frame_box(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """The image frame's lowest and highest corners (3,) each."""
-    o, u, v = (np.asarray(a, float) for a in (scene.image.origin, scene.image.u, scene.image.v))
-    corners = np.stack([o, o + u, o + v, o + u + v])
+    corners = frame_corners(scene)
     return corners.min(0), corners.max(0)
-
-
-def wall_point(scene: Scene, row: np.ndarray, col: np.ndarray) -> np.ndarray:
-    """(N, 3) centres of pixels (row, col) on the wall."""
-    im = scene.image
-    o, u, v = (np.asarray(a, float) for a in (im.origin, im.u, im.v))
-    return o + ((col + 0.5) / im.width)[:, None] * u + ((row + 0.5) / im.height)[:, None] * v
 
 
 def choose_rods(scene: Scene, parts: list[m3.Manifold], shadow: np.ndarray, size: StandSize) -> list[Rod]:
@@ -123,7 +121,7 @@ def choose_rods(scene: Scene, parts: list[m3.Manifold], shadow: np.ndarray, size
     if len(rows) > CANDIDATE_RAYS:
         pick = np.random.default_rng(0).choice(len(rows), CANDIDATE_RAYS, replace=False)
         rows, cols = rows[pick], cols[pick]
-    targets = wall_point(scene, rows, cols)
+    targets = scene.image.pixel_centres()[rows, cols]
     rods: list[Rod] = []
     for index, part in enumerate(parts):
         found = []
