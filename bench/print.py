@@ -14,7 +14,8 @@ reports:
 - IoU: the STL's shadow cast with numpy from print.json's lamp onto its wall, against the
   result's shadow.png (bar: >= 0.98 for every result);
 - stand px: pixels of the frame that the stand darkens beyond the hands' own shadow (bar: 0);
-- thin mm: the hands' thinnest part at this height, before any thickening (spots thickened);
+- thin mm: the hands' thinnest part at this height before thickening, the spots thickened,
+  and the thinnest part of the hands as printed;
 - triangles and seconds (build and write, this machine).
 
 Ends with SUMMARY n=<n> watertight=<share> min_iou=<x> stand_px=<max> median_s=<x>.
@@ -48,7 +49,7 @@ def main() -> None:
         fitted(Path(args.targets) / f"{n}.png", Path(args.fits) / n) for n in DEV
     ]
     print(
-        f"{'result':12s} {'watertight':>10s} {'cross':>5s} {'IoU':>6s} {'stand px':>8s} {'thin mm':>8s} {'thickened':>9s} {'triangles':>9s} {'s':>6s}"
+        f"{'result':12s} {'watertight':>10s} {'cross':>5s} {'IoU':>6s} {'stand px':>8s} {'thin mm':>8s} {'thickened':>9s} {'after':>6s} {'triangles':>9s} {'s':>6s}"
     )
     rows = [measure(folder, args.height_mm) for folder in folders]
     n = len(rows)
@@ -94,12 +95,13 @@ def measure(folder: Path, height_mm: float) -> dict:
         "stand_px": int((cast & ~hands).sum()),
         "thin_mm": report.thinnest_mm,
         "thickened": report.thickened_spots,
+        "thin_after_mm": float(solid.local_thickness(model.hands, settings.min_wall_mm, 32.0).part.min()),
         "triangles": report.triangles,
         "seconds": seconds,
     }
     print(
         f"{row['result']:12s} {'yes' if watertight else 'NO':>10s} {row['crossing']:5d} {row['iou']:6.3f} {row['stand_px']:8d}"
-        f" {row['thin_mm']:8.2f} {row['thickened']:9d} {row['triangles']:9d} {seconds:6.1f}",
+        f" {row['thin_mm']:8.2f} {row['thickened']:9d} {row['thin_after_mm']:6.2f} {row['triangles']:9d} {seconds:6.1f}",
         flush=True,
     )
     return row

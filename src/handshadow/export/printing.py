@@ -314,8 +314,9 @@ def printable_hands(
     thinnest = float(thickness.part.min())
     centres = solids.thickening_balls(thickness, settings.min_wall_mm)
     if len(centres):
-        thick = m3.Manifold.batch_boolean([hands, *solids.balls(centres, settings.min_wall_mm / 2)], m3.OpType.Add)
-        change = iou(mesh_shadow(scene, *solids.to_arrays(hands)), mesh_shadow(scene, *solids.to_arrays(thick)))
+        balls = solids.balls(centres, settings.min_wall_mm / 2)
+        before = mesh_shadow(scene, *solids.to_arrays(hands))
+        change = iou(before, before | mesh_shadow(scene, *solids.merged_arrays(balls)))  # a union's shadow
         if change < THICKEN_IOU_MIN:
             where = ", ".join(name_places(result, frame, centres)) or f"{len(centres)} spots"
             raise ThinPartsError(
@@ -323,7 +324,7 @@ def printable_hands(
                 f" (thinnest {thinnest:.2f} mm); thickening them would change the shadow (IoU {change:.3f});"
                 f" print at --height-mm {smallest_height(settings, thinnest):.0f} or more"
             )
-        hands = thick
+        hands = m3.Manifold.batch_boolean([hands, *balls], m3.OpType.Add)
     return solids.tidy(hands), thinnest, centres
 
 

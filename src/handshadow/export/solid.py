@@ -47,6 +47,14 @@ def to_arrays(solid: m3.Manifold) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vert_properties)[:, :3].astype(np.float64), np.asarray(mesh.tri_verts).astype(np.int64)
 
 
+def merged_arrays(solids: list[m3.Manifold]) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and faces (F, 3) of several solids side by side, not united (to cast
+    their shadow together)."""
+    arrays = [to_arrays(s) for s in solids]
+    offsets = np.cumsum([0] + [len(v) for v, _ in arrays])
+    return np.concatenate([v for v, _ in arrays]), np.concatenate([f + o for (_, f), o in zip(arrays, offsets)])
+
+
 def vertex_fans(faces: np.ndarray, num_vertices: int) -> list[np.ndarray]:
     """Vertex sets of fans (a vertex and its ring) that together hold every face: greedily the
     vertex whose fan holds the most faces not yet held. Returns arrays of vertex indices."""
@@ -136,7 +144,7 @@ class Thickness:
     points: (V, 3) the vertices; normals: (V, 3) outward unit normals; depth: (V,) distance
     from each vertex straight inward (along -normal) to where the ray leaves the solid again,
     capped at the search depth; part: (V,) the thickness of the part a vertex belongs to,
-    the largest depth among its PART_NEIGHBOURS nearest vertices and those within half the
+    the median depth over its PART_NEIGHBOURS nearest vertices and those within half the
     minimum wall (a sharp edge or a lone spike on a thick part is not a thin part; a thin
     finger is thin all around).
     """
@@ -167,18 +175,23 @@ def local_thickness(solid: m3.Manifold, min_wall: float, max_depth: float) -> Th
     tree = cKDTree(points)
     _, nearest = tree.query(points, k=min(PART_NEIGHBOURS, len(points)))
     within = tree.query_ball_point(points, 0.5 * min_wall)
-    part = np.maximum(depth[nearest].max(1), [depth[idx].max() for idx in within])
+    part = np.array([np.median(depth[np.union1d(near, idx)]) for near, idx in zip(nearest, within)])
     return Thickness(points=points, normals=normals, depth=depth, part=part)
 
 
 def thickening_balls(thickness: Thickness, min_wall: float) -> np.ndarray:
     """Centres (K, 3) of the balls of diameter ``min_wall`` that bring every part thinner
-    than it to that thickness: one half-way through the solid under each vertex of a thin
-    part, thinned to one per cell of min_wall / 4 (they overlap into a tube along a thin
-    finger)."""
-    thin = thickness.part < min_wall
-    if not thin.any():
+    than it to that thickness: one half-way through the solid under each thin vertex,
+    thinned to one per cell of min_wall / 4 (they overlap into a tube along a thin finger).
+
+    Thin vertices: those of thin parts, and those within min_wall of them whose own depth
+    is below it (the last millimetre of a thin fingertip, whose part thickness the tip's long
+    rays lift)."""
+    core = thickness.part < min_wall
+    if not core.any():
         return np.zeros((0, 3))
+    distance, _ = cKDTree(thickness.points[core]).query(thickness.points, distance_upper_bound=min_wall)
+    thin = core | (np.isfinite(distance) & (thickness.depth < min_wall))
     centres = thickness.centres[thin]
     cells = np.floor(centres / (min_wall / 4)).astype(np.int64)
     _, first = np.unique(cells, axis=0, return_index=True)
