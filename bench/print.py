@@ -18,7 +18,9 @@ reports:
   and the thinnest part of the hands as printed;
 - triangles and seconds (build and write, this machine).
 
-Ends with SUMMARY n=<n> watertight=<share> min_iou=<x> stand_px=<max> median_s=<x>.
+A result that cannot be printed at this height (thin parts whose thickening would change the
+shadow) is a row saying so. Ends with SUMMARY n=<n> refused=<n> watertight=<share of the
+printed> min_iou=<x> stand_px=<max> median_s=<x>.
 """
 
 from __future__ import annotations
@@ -52,10 +54,13 @@ def main() -> None:
         f"{'result':12s} {'watertight':>10s} {'cross':>5s} {'IoU':>6s} {'stand px':>8s} {'thin mm':>8s} {'thickened':>9s} {'after':>6s} {'triangles':>9s} {'s':>6s}"
     )
     rows = [measure(folder, args.height_mm) for folder in folders]
-    n = len(rows)
+    printed = [r for r in rows if "refused" not in r]
+    n = len(printed)
     print(
-        f"SUMMARY n={n} watertight={sum(r['watertight'] for r in rows) / n:.2f} min_iou={min(r['iou'] for r in rows):.3f}"
-        f" stand_px={max(r['stand_px'] for r in rows)} median_s={statistics.median(r['seconds'] for r in rows):.1f}"
+        f"SUMMARY n={len(rows)} refused={len(rows) - n} watertight={sum(r['watertight'] for r in printed) / max(n, 1):.2f}"
+        f" min_iou={min((r['iou'] for r in printed), default=float('nan')):.3f}"
+        f" stand_px={max((r['stand_px'] for r in printed), default=0)}"
+        f" median_s={statistics.median(r['seconds'] for r in rows):.1f}"
     )
 
 
@@ -73,7 +78,12 @@ def measure(folder: Path, height_mm: float) -> dict:
     started = time.perf_counter()
     result = printing.load_result(folder)
     settings = printing.PrintSettings(height_mm=height_mm)
-    model = printing.build_print(result, settings)
+    try:
+        model = printing.build_print(result, settings)
+    except printing.PrintError as exc:
+        row = {"result": folder.name, "refused": str(exc), "seconds": time.perf_counter() - started}
+        print(f"{folder.name:12s} refused: ...{str(exc)[-40:]}", flush=True)
+        return row
     report = printing.save_print(model, result, settings, printing.output_paths(folder, None))
     seconds = time.perf_counter() - started
     stl = folder / "print.stl"
@@ -95,7 +105,7 @@ def measure(folder: Path, height_mm: float) -> dict:
         "stand_px": int((cast & ~hands).sum()),
         "thin_mm": report.thinnest_mm,
         "thickened": report.thickened_spots,
-        "thin_after_mm": float(solid.local_thickness(model.hands, settings.min_wall_mm, 32.0).part.min()),
+        "thin_after_mm": float(solid.local_thickness(model.hands, 32.0).part.min()),
         "triangles": report.triangles,
         "seconds": seconds,
     }

@@ -122,12 +122,12 @@ def test_thickening_reaches_the_minimum_wall():
     rod = trimesh.creation.cylinder(radius=0.4, height=8, sections=16).subdivide().subdivide()
     rod.apply_translation((0, 0, 8))
     hands = solid.clean_solid([(block.vertices, block.faces), (rod.vertices, rod.faces)])
-    thickness = solid.local_thickness(hands, 1.2, max_depth=30)
+    thickness = solid.local_thickness(hands, max_depth=30)
     assert thickness.part.min() == pytest.approx(0.8, abs=0.1)
     centres = solid.thickening_balls(thickness, 1.2)
     assert len(centres) > 3 and np.all(centres[:, 2] > 4.5)  # along the rod only
     thick = m3.Manifold.batch_boolean([hands, *solid.balls(centres, 0.6)], m3.OpType.Add)
-    after = solid.local_thickness(solid.fill(thick), 1.2, max_depth=30)
+    after = solid.local_thickness(solid.fill(thick), max_depth=30)
     assert after.part[after.points[:, 2] > 6].min() >= 1.2 - 0.05  # the rod, clear of where it meets the block
 
 

@@ -285,9 +285,9 @@ def build_print(result: ResultMeshes, settings: PrintSettings) -> PrintModel:
         rods, foot_length, stand = _stand(
             scene, hands, mesh_shadow(scene, *solids.to_arrays(hands)), settings.stand_size
         )
-        whole = solids.tidy(m3.Manifold.batch_boolean([hands, stand], m3.OpType.Add))
+        whole = m3.Manifold.batch_boolean([hands, stand], m3.OpType.Add)
     return PrintModel(
-        solid=solids.in_float32(whole),
+        solid=solids.for_stl(whole),
         hands=hands,
         stand=stand,
         scene=scene,
@@ -305,27 +305,71 @@ def printable_hands(
     """The hands as one clean solid in print millimetres, thickened where thinner than the
     minimum wall; also the thinnest part before thickening (mm) and the thickening balls'
     centres (K, 3). Raises ThinPartsError, naming the parts and the smallest height that
-    needs no thickening, when thickening would change the hands' shadow by more than
-    THICKEN_IOU_MIN."""
+    works, when thickening would change the hands' shadow by more than THICKEN_IOU_MIN."""
+    hands = solids.clean_solid([(frame.apply(v), f) for _, v, f in result.meshes])
+    thick = thickening(hands, scene, settings.min_wall_mm)
+    if thick.shadow_iou < THICKEN_IOU_MIN:
+        where = ", ".join(name_places(result, frame, thick.centres)) or f"{len(thick.centres)} spots"
+        raise ThinPartsError(
+            f"thinner than {settings.min_wall_mm:g} mm at {settings.height_mm:g} mm tall: {where}"
+            f" (thinnest {thick.thinnest:.2f} mm); thickening them would change the shadow"
+            f" (IoU {thick.shadow_iou:.3f}); print at --height-mm {smallest_height(result, frame, hands, settings):.0f}"
+            " or more"
+        )
+    if len(thick.balls):
+        hands = m3.Manifold.batch_boolean([hands, *thick.balls], m3.OpType.Add)
+    return hands, thick.thinnest, thick.centres
+
+
+@dataclasses.dataclass(frozen=True)
+class Thickening:
+    """What thickening a solid would take. thinnest: its thinnest part (mm); centres: (K, 3)
+    ball centres; balls: the balls (diameter: the minimum wall); shadow_iou: the solid's
+    shadow against the thickened one's (1 without balls)."""
+
+    thinnest: float
+    centres: np.ndarray
+    balls: list[m3.Manifold]
+    shadow_iou: float
+
+
+def thickening(hands: m3.Manifold, scene: Scene, min_wall: float) -> Thickening:
+    """The balls that bring the hands' thin parts to ``min_wall`` (mm) and how much they would
+    change the shadow (the shadow of a union is the union of the shadows: no union needed)."""
     from handshadow.render import mesh_shadow
 
-    hands = solids.clean_solid([(frame.apply(v), f) for _, v, f in result.meshes])
-    thickness = solids.local_thickness(hands, settings.min_wall_mm, max_depth=10 * settings.min_wall_mm + 20)
-    thinnest = float(thickness.part.min())
-    centres = solids.thickening_balls(thickness, settings.min_wall_mm)
-    if len(centres):
-        balls = solids.balls(centres, settings.min_wall_mm / 2)
+    thickness = solids.local_thickness(hands, max_depth=10 * min_wall + 20)
+    centres = solids.thickening_balls(thickness, min_wall)
+    balls = solids.balls(centres, min_wall / 2)
+    change = 1.0
+    if balls:
         before = mesh_shadow(scene, *solids.to_arrays(hands))
-        change = iou(before, before | mesh_shadow(scene, *solids.merged_arrays(balls)))  # a union's shadow
-        if change < THICKEN_IOU_MIN:
-            where = ", ".join(name_places(result, frame, centres)) or f"{len(centres)} spots"
-            raise ThinPartsError(
-                f"thinner than {settings.min_wall_mm:g} mm at {settings.height_mm:g} mm tall: {where}"
-                f" (thinnest {thinnest:.2f} mm); thickening them would change the shadow (IoU {change:.3f});"
-                f" print at --height-mm {smallest_height(settings, thinnest):.0f} or more"
-            )
-        hands = m3.Manifold.batch_boolean([hands, *balls], m3.OpType.Add)
-    return solids.tidy(hands), thinnest, centres
+        change = iou(before, before | mesh_shadow(scene, *solids.merged_arrays(balls)))
+    return Thickening(float(thickness.part.min()), centres, balls, change)
+
+
+def smallest_height(result: ResultMeshes, frame: PrintFrame, hands: m3.Manifold, settings: PrintSettings) -> float:
+    """About the smallest height (mm, up to the next 5) at which thickening changes the shadow
+    by less than THICKEN_IOU_MIN: four bisection steps between this height and one at which
+    nothing is thinner than the minimum wall (thickness scales with the print, the stand's
+    millimetres do not). ``hands``: the clean solid in ``frame``'s coordinates."""
+    vertices = np.concatenate([v for _, v, _ in result.meshes])
+
+    def works(height: float) -> bool:
+        other = print_frame(result.scene, vertices, dataclasses.replace(settings, height_mm=height))
+        ratio = other.mm_per_m / frame.mm_per_m
+        scaled = hands.translate(tuple(-frame.translation)).scale((ratio,) * 3).translate(tuple(other.translation))
+        change = thickening(scaled, other.scene(result.scene), settings.min_wall_mm).shadow_iou
+        return change >= THICKEN_IOU_MIN + 0.002  # a little to spare: the measure is not smooth in the height
+
+    below = settings.stand_size.board + settings.stand_size.margin if settings.stand else 0.0
+    thinnest = solids.local_thickness(hands, 10 * settings.min_wall_mm + 20).part.min()
+    low = settings.height_mm
+    high = max(low * 1.1, below + (low - below) * settings.min_wall_mm / thinnest * 1.05)
+    for _ in range(4):
+        middle = 0.5 * (low + high)
+        low, high = (low, middle) if works(middle) else (middle, high)
+    return float(5 * np.ceil(high / 5))
 
 
 def name_places(result: ResultMeshes, frame: PrintFrame, points: np.ndarray) -> list[str]:
@@ -377,13 +421,6 @@ def _to_polyline(p: np.ndarray, chain: np.ndarray) -> tuple[float, float]:
         d = float(np.linalg.norm(a + t * (b - a) - p))
         best = min(best, (d, i + t if i or t_raw >= 0 else t_raw))
     return best
-
-
-def smallest_height(settings: PrintSettings, thinnest_mm: float) -> float:
-    """The height at which the thinnest part reaches the minimum wall (thickness scales with
-    the print; the stand's fixed millimetres do not), rounded up, in mm."""
-    below = settings.stand_size.board + settings.stand_size.margin if settings.stand else 0.0
-    return float(np.ceil(below + (settings.height_mm - below) * settings.min_wall_mm / thinnest_mm * 1.02))
 
 
 def _stand(
@@ -549,15 +586,16 @@ def can_write_3mf() -> bool:
 
 
 def check_printable(model: PrintModel, settings: PrintSettings) -> tuple[np.ndarray, np.ndarray]:
-    """The print's vertices (V, 3) and faces (F, 3) after checking that it is a watertight,
-    consistently wound solid of positive volume with no flat triangle, also in the 32-bit
-    coordinates an STL stores, and in one piece when it has a stand."""
+    """The print's vertices (V, 3) and faces (F, 3) after checking that, read back from an
+    STL (32-bit positions, corners at one position fused), it is a watertight, consistently
+    wound solid of positive volume with no flat triangle, and in one piece with a stand."""
     import trimesh
 
     vertices, faces = solids.to_arrays(model.solid)
-    stored = trimesh.Trimesh(vertices.astype(np.float32).astype(np.float64), faces, process=False)  # as in the STL
-    closed = stored.is_watertight and stored.is_winding_consistent and stored.volume > 0
-    if model.solid.status() != m3.Error.NoError or not closed or not (stored.area_faces > 0).all():
+    stored, index = np.unique(vertices.astype(np.float32), axis=0, return_inverse=True)
+    mesh = trimesh.Trimesh(stored.astype(np.float64), index.reshape(-1)[faces], process=False)
+    closed = mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0 and (mesh.area_faces > 0).all()
+    if model.solid.status() != m3.Error.NoError or not closed:
         raise PrintError("the united solid is not watertight (a bug: please report it with the result folder)")
     pieces = len(solids.parts(model.solid))
     if settings.stand and pieces != 1:

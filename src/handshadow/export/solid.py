@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 SHELL_MM = 0.02  # growth of the skin while uniting its fans (well below any printer's resolution)
-TIDY_MM = 0.01  # slivers below this are collapsed (a hundredth of a printer's finest line)
+STL_TOLERANCE = 1e-4  # edges shorter than this are collapsed before writing (units of the solid)
 PART_NEIGHBOURS = 16  # a part is thin when so many vertices around are thin too
 _OCTAHEDRON = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
 
@@ -106,17 +106,14 @@ def fill(solid: m3.Manifold) -> m3.Manifold:
     return m3.Manifold.batch_boolean(kept, m3.OpType.Add) if len(kept) != 1 else kept[0]
 
 
-def tidy(solid: m3.Manifold, tolerance: float = TIDY_MM) -> m3.Manifold:
-    """The solid with edges shorter and triangles thinner than ``tolerance`` collapsed (a
-    union of many small pieces leaves slivers that 32-bit STL coordinates would flatten into
-    holes); the surface moves by at most the tolerance."""
-    return solid.as_original().simplify(tolerance)
-
-
-def in_float32(solid: m3.Manifold) -> m3.Manifold:
-    """The solid with its vertices rounded to the 32-bit floats an STL stores; manifold3d
-    collapses the few triangles the rounding flattens, so the file holds exactly this mesh."""
-    vertices, faces = to_arrays(solid)
+def for_stl(solid: m3.Manifold, tolerance: float = STL_TOLERANCE) -> m3.Manifold:
+    """The solid as an STL can hold it: edges shorter than ``tolerance`` collapsed (a union
+    of many small pieces leaves slivers, and corners that touch without being joined, which
+    a file of bare positions would fuse), then the vertices rounded to 32-bit floats, with
+    manifold3d collapsing any triangle the rounding flattens. The surface moves by about the
+    tolerance. (A coarser simplification, 0.01 mm, let a few edges pass through faces.)"""
+    simple = solid.as_original().simplify(tolerance)
+    vertices, faces = to_arrays(simple)
     rounded = m3.Manifold(m3.Mesh(vert_properties=vertices.astype(np.float32), tri_verts=faces.astype(np.uint32)))
     if rounded.status() != m3.Error.NoError:
         raise ValueError(f"rounding to 32-bit floats broke the solid ({rounded.status().name})")
@@ -141,15 +138,16 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 class Thickness:
     """Thickness of a solid at its surface vertices.
 
-    points: (V, 3) the vertices; normals: (V, 3) outward unit normals; depth: (V,) distance
+    points: (V, 3) the vertices; faces: (F, 3) the surface's triangles; normals: (V, 3)
+    outward unit normals; depth: (V,) distance
     from each vertex straight inward (along -normal) to where the ray leaves the solid again,
     capped at the search depth; part: (V,) the thickness of the part a vertex belongs to,
-    the median depth over its PART_NEIGHBOURS nearest vertices and those within half the
-    minimum wall (a sharp edge or a lone spike on a thick part is not a thin part; a thin
-    finger is thin all around).
+    the median depth over its PART_NEIGHBOURS nearest vertices (a sharp edge or a lone spike
+    on a thick part is not a thin part; a thin finger is thin all around).
     """
 
     points: np.ndarray
+    faces: np.ndarray
     normals: np.ndarray
     depth: np.ndarray
     part: np.ndarray
@@ -160,7 +158,7 @@ class Thickness:
         return self.points - 0.5 * self.depth[:, None] * self.normals
 
 
-def local_thickness(solid: m3.Manifold, min_wall: float, max_depth: float) -> Thickness:
+def local_thickness(solid: m3.Manifold, max_depth: float) -> Thickness:
     """Thickness at each vertex of a clean solid (no self-crossings): the inward ray's length
     through it (a finger of diameter d: d across it), then the part thickness (see
     :class:`Thickness`). Units of the solid; max_depth caps the rays."""
@@ -172,17 +170,16 @@ def local_thickness(solid: m3.Manifold, min_wall: float, max_depth: float) -> Th
         hits = solid.ray_cast(p - lead * n, p - max_depth * n)
         if hits:
             depth[i] = lead + hits[0].distance * (max_depth - lead)
-    tree = cKDTree(points)
-    _, nearest = tree.query(points, k=min(PART_NEIGHBOURS, len(points)))
-    within = tree.query_ball_point(points, 0.5 * min_wall)
-    part = np.array([np.median(depth[np.union1d(near, idx)]) for near, idx in zip(nearest, within)])
-    return Thickness(points=points, normals=normals, depth=depth, part=part)
+    _, nearest = cKDTree(points).query(points, k=min(PART_NEIGHBOURS, len(points)))
+    part = np.median(depth[nearest], axis=1)
+    return Thickness(points=points, faces=faces, normals=normals, depth=depth, part=part)
 
 
 def thickening_balls(thickness: Thickness, min_wall: float) -> np.ndarray:
     """Centres (K, 3) of the balls of diameter ``min_wall`` that bring every part thinner
-    than it to that thickness: one half-way through the solid under each thin vertex,
-    thinned to one per cell of min_wall / 4 (they overlap into a tube along a thin finger).
+    than it to that thickness: half-way through the solid under each thin vertex and along
+    the edges between thin vertices (so the balls overlap into a tube along a thin finger,
+    however sparse its vertices), thinned to one per cell of min_wall / 4.
 
     Thin vertices: those of thin parts, and those within min_wall of them whose own depth
     is below it (the last millimetre of a thin fingertip, whose part thickness the tip's long
@@ -192,10 +189,18 @@ def thickening_balls(thickness: Thickness, min_wall: float) -> np.ndarray:
         return np.zeros((0, 3))
     distance, _ = cKDTree(thickness.points[core]).query(thickness.points, distance_upper_bound=min_wall)
     thin = core | (np.isfinite(distance) & (thickness.depth < min_wall))
-    centres = thickness.centres[thin]
-    cells = np.floor(centres / (min_wall / 4)).astype(np.int64)
+    centres = thickness.centres
+    f = thickness.faces
+    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1), axis=0)
+    edges = edges[thin[edges].all(1)]
+    a, b = centres[edges[:, 0]], centres[edges[:, 1]]
+    steps = np.ceil(np.linalg.norm(b - a, axis=1) / (min_wall / 4)).astype(np.int64)
+    which = np.repeat(np.arange(len(edges)), steps)
+    t = (np.arange(len(which)) - np.repeat(np.cumsum(steps) - steps, steps) + 0.5) / steps[which]
+    points = np.concatenate([centres[thin], a[which] + t[:, None] * (b[which] - a[which])])
+    cells = np.floor(points / (min_wall / 4)).astype(np.int64)
     _, first = np.unique(cells, axis=0, return_index=True)
-    return centres[np.sort(first)]
+    return points[np.sort(first)]
 
 
 def balls(centres: np.ndarray, radius: float) -> list[m3.Manifold]:
