@@ -52,7 +52,7 @@ from handshadow.metrics import iou
 from handshadow.scene import ImageFrame, Light, Scene, SceneError, Wall
 
 FORMAT = "handshadow.print/1"
-THICKEN_IOU_MIN = 0.99  # thickening may change the hands' own shadow at most this much
+SHADOW_IOU_MIN = 0.985  # a thickened print's shadow against the fit's, at the least
 MIN_HEIGHT_MM = 20.0
 
 
@@ -305,16 +305,22 @@ def printable_hands(
     """The hands as one clean solid in print millimetres, thickened where thinner than the
     minimum wall; also the thinnest part before thickening (mm) and the thickening balls'
     centres (K, 3). Raises ThinPartsError, naming the parts and the smallest height that
-    works, when thickening would change the hands' shadow by more than THICKEN_IOU_MIN."""
+    works, when the thickened hands' shadow would match the fit's by less than
+    SHADOW_IOU_MIN (IoU)."""
+    from handshadow.render import mesh_shadow
+
+    reference = mesh_shadow(result.scene, *solids.side_by_side([(v, f) for _, v, f in result.meshes]))
     hands = solids.clean_solid([(frame.apply(v), f) for _, v, f in result.meshes])
-    thick = thickening(hands, scene, settings.min_wall_mm)
-    if thick.shadow_iou < THICKEN_IOU_MIN:
+    thickness = solids.local_thickness(hands, max_depth=10 * settings.min_wall_mm + 20)
+    cast = mesh_shadow(scene, *solids.to_arrays(hands))  # in pixels the same at any height
+    thick = thickening(thickness, scene, settings.min_wall_mm, cast, reference)
+    if len(thick.balls) and thick.shadow_iou < SHADOW_IOU_MIN:
         where = ", ".join(name_places(result, frame, thick.centres)) or f"{len(thick.centres)} spots"
+        height = smallest_height(result, frame, thickness, cast, reference, settings)
         raise ThinPartsError(
             f"thinner than {settings.min_wall_mm:g} mm at {settings.height_mm:g} mm tall: {where}"
-            f" (thinnest {thick.thinnest:.2f} mm); thickening them would change the shadow"
-            f" (IoU {thick.shadow_iou:.3f}); print at --height-mm {smallest_height(result, frame, hands, settings):.0f}"
-            " or more"
+            f" (thinnest {thick.thinnest:.2f} mm); thickened, its shadow would drift from the fit's"
+            f" (IoU {thick.shadow_iou:.3f}); print at --height-mm {height:.0f} or more"
         )
     if len(thick.balls):
         hands = m3.Manifold.batch_boolean([hands, *thick.balls], m3.OpType.Add)
@@ -324,8 +330,8 @@ def printable_hands(
 @dataclasses.dataclass(frozen=True)
 class Thickening:
     """What thickening a solid would take. thinnest: its thinnest part (mm); centres: (K, 3)
-    ball centres; balls: the balls (diameter: the minimum wall); shadow_iou: the solid's
-    shadow against the thickened one's (1 without balls)."""
+    ball centres; balls: the balls (diameter: the minimum wall); shadow_iou: the thickened
+    solid's shadow against the reference."""
 
     thinnest: float
     centres: np.ndarray
@@ -333,40 +339,46 @@ class Thickening:
     shadow_iou: float
 
 
-def thickening(hands: m3.Manifold, scene: Scene, min_wall: float) -> Thickening:
-    """The balls that bring the hands' thin parts to ``min_wall`` (mm) and how much they would
-    change the shadow (the shadow of a union is the union of the shadows: no union needed)."""
+def thickening(
+    thickness: solids.Thickness, scene: Scene, min_wall: float, cast: np.ndarray, reference: np.ndarray
+) -> Thickening:
+    """The balls that bring a solid's thin parts to ``min_wall`` (mm), and how well the
+    thickened solid's shadow, ``cast`` (H, W) bool (the solid's) with the balls', would match
+    ``reference`` (H, W) bool (the shadow of a union is the union of the shadows)."""
     from handshadow.render import mesh_shadow
 
-    thickness = solids.local_thickness(hands, max_depth=10 * min_wall + 20)
     centres = solids.thickening_balls(thickness, min_wall)
     balls = solids.balls(centres, min_wall / 2)
-    change = 1.0
     if balls:
-        before = mesh_shadow(scene, *solids.to_arrays(hands))
-        change = iou(before, before | mesh_shadow(scene, *solids.merged_arrays(balls)))
-    return Thickening(float(thickness.part.min()), centres, balls, change)
+        cast = cast | mesh_shadow(scene, *solids.side_by_side([solids.to_arrays(b) for b in balls]))
+    return Thickening(float(thickness.part.min()), centres, balls, iou(cast, reference))
 
 
-def smallest_height(result: ResultMeshes, frame: PrintFrame, hands: m3.Manifold, settings: PrintSettings) -> float:
-    """About the smallest height (mm, up to the next 5) at which thickening changes the shadow
-    by less than THICKEN_IOU_MIN: four bisection steps between this height and one at which
-    nothing is thinner than the minimum wall (thickness scales with the print, the stand's
-    millimetres do not). ``hands``: the clean solid in ``frame``'s coordinates."""
+def smallest_height(
+    result: ResultMeshes,
+    frame: PrintFrame,
+    thickness: solids.Thickness,
+    cast: np.ndarray,
+    reference: np.ndarray,
+    settings: PrintSettings,
+) -> float:
+    """About the smallest height (mm, up to the next 5) at which the thickened hands' shadow
+    still matches ``reference`` by SHADOW_IOU_MIN: four bisection steps between this height
+    and one at which nothing is thinner than the minimum wall. The hands' thickness (in
+    ``frame``'s coordinates) and shadow ``cast`` scale with the print; the stand's
+    millimetres do not."""
     vertices = np.concatenate([v for _, v, _ in result.meshes])
 
     def works(height: float) -> bool:
         other = print_frame(result.scene, vertices, dataclasses.replace(settings, height_mm=height))
-        ratio = other.mm_per_m / frame.mm_per_m
-        scaled = hands.translate(tuple(-frame.translation)).scale((ratio,) * 3).translate(tuple(other.translation))
-        change = thickening(scaled, other.scene(result.scene), settings.min_wall_mm).shadow_iou
-        return change >= THICKEN_IOU_MIN + 0.002  # a little to spare: the measure is not smooth in the height
+        moved = thickness.moved(other.mm_per_m / frame.mm_per_m, frame.translation, other.translation)
+        match = thickening(moved, other.scene(result.scene), settings.min_wall_mm, cast, reference).shadow_iou
+        return match >= SHADOW_IOU_MIN + 0.002  # a little to spare: the measure is not smooth in the height
 
     below = settings.stand_size.board + settings.stand_size.margin if settings.stand else 0.0
-    thinnest = solids.local_thickness(hands, 10 * settings.min_wall_mm + 20).part.min()
     low = settings.height_mm
-    high = max(low * 1.1, below + (low - below) * settings.min_wall_mm / thinnest * 1.05)
-    for _ in range(4):
+    high = max(low * 1.1, below + (low - below) * settings.min_wall_mm / thickness.part.min() * 1.05)
+    for _ in range(5):
         middle = 0.5 * (low + high)
         low, high = (low, middle) if works(middle) else (middle, high)
     return float(5 * np.ceil(high / 5))

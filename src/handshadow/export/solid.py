@@ -5,11 +5,13 @@ Posed hands are closed surfaces but not clean solids: skinning folds the skin at
 and fingers that press together pass through each other, so a hand's own triangles cross
 (a fitted hand has a few hundred crossing edges). Boolean operations assume operands that do
 not cross themselves, so a hand is not handed to manifold3d as it is. Instead each vertex's
-fan of triangles is wrapped in its convex hull, grown by ``SHELL_MM`` (a small octahedron
+fan of triangles is wrapped in its convex hull, grown by ``shell`` (a small octahedron
 at each corner, so every edge lies strictly inside the hulls of both its fans); manifold3d
 unites these small convex pieces into a thin shell, and the shell's inner surfaces (the
 hollow inside the hand and any pockets of the folds) are dropped. What is left is the region
-enclosed by the skin, grown by at most ``SHELL_MM``, as one manifold without crossings.
+enclosed by the skin, grown by at most ``shell``, as one manifold without crossings. The
+growth and the hulls' chords over concave places scale with the solid, so the result of
+scaled meshes is the scaled result when ``shell`` scales too.
 
 Units are whatever the vertices are in; the printing stage works in millimetres.
 """
@@ -22,7 +24,7 @@ import manifold3d as m3
 import numpy as np
 from scipy.spatial import cKDTree
 
-SHELL_MM = 0.02  # growth of the skin while uniting its fans (well below any printer's resolution)
+SHELL = 1e-4  # growth of the skin while uniting its fans, as a share of the solid's size
 STL_TOLERANCE = 1e-4  # edges shorter than this are collapsed before writing (units of the solid)
 PART_NEIGHBOURS = 16  # a part is thin when so many vertices around are thin too
 _OCTAHEDRON = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
@@ -47,10 +49,10 @@ def to_arrays(solid: m3.Manifold) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vert_properties)[:, :3].astype(np.float64), np.asarray(mesh.tri_verts).astype(np.int64)
 
 
-def merged_arrays(solids: list[m3.Manifold]) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) and faces (F, 3) of several solids side by side, not united (to cast
-    their shadow together)."""
-    arrays = [to_arrays(s) for s in solids]
+def side_by_side(meshes: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and faces (F, 3) of several meshes (each vertices, faces) in one pair
+    of arrays, not united (to cast their shadow together)."""
+    arrays = [(np.asarray(v, np.float64), np.asarray(f, np.int64)) for v, f in meshes]
     offsets = np.cumsum([0] + [len(v) for v, _ in arrays])
     return np.concatenate([v for v, _ in arrays]), np.concatenate([f + o for (_, f), o in zip(arrays, offsets)])
 
@@ -77,13 +79,17 @@ def vertex_fans(faces: np.ndarray, num_vertices: int) -> list[np.ndarray]:
         fans.append(np.unique(faces[incident[k]]))
 
 
-def clean_solid(meshes: list[tuple[np.ndarray, np.ndarray]], shell: float = SHELL_MM) -> m3.Manifold:
+def clean_solid(meshes: list[tuple[np.ndarray, np.ndarray]], shell: float | None = None) -> m3.Manifold:
     """The region enclosed by closed surfaces (each vertices (V, 3), faces (F, 3)), as one
-    manifold3d solid without self-crossings, grown by at most ``shell``.
+    manifold3d solid without self-crossings, grown by at most ``shell`` (default: SHELL of
+    the diagonal of all vertices' bounding box; 0.02 mm on a 150 mm print).
 
     Surfaces may cross themselves and each other. Pieces that end up apart stay apart (the
     result may hold several disjoint solids; see :func:`parts`).
     """
+    if shell is None:
+        every = np.concatenate([np.asarray(v, np.float64) for v, _ in meshes])
+        shell = SHELL * float(np.linalg.norm(every.max(0) - every.min(0)))
     pieces = []
     for vertices, faces in meshes:
         v = np.asarray(vertices, np.float64)
@@ -156,6 +162,16 @@ class Thickness:
     def centres(self) -> np.ndarray:
         """(V, 3) points half-way through the solid under each vertex."""
         return self.points - 0.5 * self.depth[:, None] * self.normals
+
+    def moved(self, ratio: float, before: np.ndarray, after: np.ndarray) -> Thickness:
+        """The thickness of the same solid scaled by ``ratio`` about the point ``before``
+        (3,), which goes to ``after`` (3,)."""
+        return dataclasses.replace(
+            self,
+            points=ratio * (self.points - before) + after,
+            depth=ratio * self.depth,
+            part=ratio * self.part,
+        )
 
 
 def local_thickness(solid: m3.Manifold, max_depth: float) -> Thickness:
