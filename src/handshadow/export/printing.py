@@ -3,25 +3,23 @@ that casts no shadow in the picture, scaled to a height, with the lamp's place.
 
     report = print_result("out/bird", height_mm=150)   # print.stl, print.3mf, print.json, print.png
 
-Steps, each in its own function:
+Steps:
 
-1. :func:`load_result` reads scene.json, the hand meshes it names and shadow.png, and checks
-   that each mesh is a closed surface between the lamp and the wall.
-2. :func:`print_frame` picks the similarity (uniform scale, rotation, shift) from the scene's
-   metres to the print's millimetres: the whole print is ``height_mm`` tall. A point light's
-   shadow is unchanged when the lamp, the wall and the hands scale together, so the print's
-   lamp and wall (in print.json) are the scene's, mapped the same way.
-3. :func:`build_print` unites the hands (:mod:`handshadow.export.solid`: a clean manifold even
-   where skinning folds the skin or hands pass through each other), measures their thickness,
-   thickens parts thinner than the minimum wall (or refuses, naming them, with the smallest
-   height that needs no thickening), and adds the stand (:mod:`handshadow.export.stand`),
+1. :func:`load_result` (:mod:`~handshadow.export.printframe`) reads scene.json, the hand
+   meshes it names and shadow.png, and checks that each mesh is a closed surface between the
+   lamp and the wall.
+2. :func:`print_frame` (same module) picks the similarity (uniform scale, rotation, shift) from
+   the scene's metres to the print's millimetres (x right, y up from the table, z toward the
+   lamp): the whole print is ``height_mm`` tall. A point light's shadow is unchanged when the
+   lamp, the wall and the hands scale together, so the print's lamp and wall (in print.json)
+   are the scene's, mapped the same way.
+3. :func:`build_print` unites the hands (:mod:`~handshadow.export.solid`: a clean manifold even
+   where skinning folds the skin or hands pass through each other), thickens parts thinner
+   than the minimum wall or refuses with the height that works
+   (:mod:`~handshadow.export.thinparts`), and adds the stand (:mod:`~handshadow.export.stand`),
    checking with the exact shadow renderer that no part of it casts a shadow in the frame.
 4. :func:`save_print` checks the solid as an STL will store it and writes the STL (and 3MF),
-   print.json and print.png (:mod:`handshadow.export.printsheet`), all or nothing.
-
-Print coordinates (millimetres): x to the performer's right, y up with the table at y = 0, z
-from the back of the board toward the lamp; the board is the wall (its front face, z =
-board thickness). Without a stand y = 0 is the print's lowest point and z = 0 the wall.
+   print.json and print.png (:mod:`~handshadow.export.printsheet`), all or nothing.
 
 print.json::
 
@@ -38,210 +36,44 @@ print.json::
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from pathlib import Path
 
 import manifold3d as m3
 import numpy as np
 
-from handshadow.errors import HandshadowError
 from handshadow.export import solid as solids
 from handshadow.export import stand as stands
+from handshadow.export.printframe import (
+    PrintError,
+    PrintFrame,
+    PrintSettings,
+    ResultMeshes,
+    load_result,
+    print_frame,
+    read_closed_mesh,
+    read_shadow,
+)
+from handshadow.export.thinparts import ThinPartsError, name_places, printable_hands
 from handshadow.metrics import iou
-from handshadow.scene import ImageFrame, Light, Scene, SceneError, Wall
+from handshadow.scene import Scene
+
+__all__ = [
+    "PrintError",
+    "PrintFrame",
+    "PrintReport",
+    "PrintSettings",
+    "ResultMeshes",
+    "ThinPartsError",
+    "build_print",
+    "load_result",
+    "print_result",
+    "read_closed_mesh",
+    "read_shadow",
+    "save_print",
+]
 
 FORMAT = "handshadow.print/1"
-SHADOW_IOU_MIN = 0.985  # a thickened print's shadow against the fit's, at the least
-MIN_HEIGHT_MM = 20.0
-
-
-class PrintError(HandshadowError):
-    """A result folder that cannot be printed, or settings that cannot work."""
-
-
-@dataclasses.dataclass(frozen=True)
-class PrintSettings:
-    """height_mm: the whole print's height (stand included); stand: add the board, foot and
-    rods; min_wall_mm: the thinnest part the printer makes."""
-
-    height_mm: float = 150.0
-    stand: bool = True
-    min_wall_mm: float = 1.2
-
-    @property
-    def stand_size(self) -> stands.StandSize:
-        """The stand's sizes for this height."""
-        return stands.StandSize.for_height(self.height_mm)
-
-
-@dataclasses.dataclass(frozen=True)
-class ResultMeshes:
-    """A result folder's contents: the scene (metres), the hand meshes (name, vertices (V, 3)
-    metres, faces (F, 3)), its shadow.png as (H, W) bool (None when absent), its folder."""
-
-    folder: Path
-    scene: Scene
-    meshes: tuple[tuple[str, np.ndarray, np.ndarray], ...]
-    shadow: np.ndarray | None
-
-
-# -- 1. reading --------------------------------------------------------------------------
-
-
-def load_result(result_dir: str | Path) -> ResultMeshes:
-    """Read a result folder written by ``fit`` or ``render``; raises PrintError with one line."""
-    folder = Path(result_dir)
-    if not folder.is_dir():
-        raise PrintError(f"no result folder at {folder}")
-    scene_path = folder / "scene.json"
-    if not scene_path.is_file():
-        raise PrintError(f"{folder} has no scene.json (print a folder written by 'handshadow fit' or 'render')")
-    try:
-        data = json.loads(scene_path.read_text())
-        scene = Scene.from_json(data)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise PrintError(f"{scene_path} is not valid JSON ({exc})") from None
-    except SceneError as exc:
-        raise PrintError(f"{scene_path}: {exc}") from None
-    if scene.light.type != "point":
-        raise PrintError("only results lit by a point light can be printed (a torch is a point light)")
-    names = data.get("meshes") or sorted(p.name for p in folder.glob("*.obj"))
-    if not isinstance(names, list) or not names:
-        raise PrintError(f"{folder} holds no hand meshes (left.obj, right.obj)")
-    meshes = tuple((str(name), *read_closed_mesh(folder / str(name), scene)) for name in names)
-    return ResultMeshes(folder=folder, scene=scene, meshes=meshes, shadow=read_shadow(folder / "shadow.png"))
-
-
-def read_closed_mesh(path: Path, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) float64 and outward faces (F, 3) of an OBJ that must be a closed
-    surface strictly between the lamp and the wall."""
-    import trimesh
-
-    if not path.is_file():
-        raise PrintError(f"{path} is missing")
-    try:
-        mesh = trimesh.load(path, file_type=path.suffix.lstrip(".") or "obj", process=False, force="mesh")
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        faces = np.asarray(mesh.faces, dtype=np.int64)
-    except Exception as exc:  # trimesh raises many kinds on a corrupt file
-        raise PrintError(f"{path} is not a readable mesh ({exc.__class__.__name__})") from None
-    if len(faces) == 0 or not np.isfinite(vertices).all():
-        raise PrintError(f"{path} has no triangles or non-finite vertices")
-    mesh = trimesh.Trimesh(vertices, faces, process=True)  # merges duplicate corners, drops degenerates
-    if not mesh.is_watertight:
-        trimesh.repair.fill_holes(mesh)
-    if not (mesh.is_watertight and mesh.is_winding_consistent):
-        raise PrintError(f"{path} is not a closed surface; re-create it with 'handshadow render' on pose.json")
-    if mesh.volume < 0:
-        mesh.invert()
-    height = (mesh.vertices - np.asarray(scene.wall.point)) @ np.asarray(scene.wall.normal)
-    lamp = scene.light_depth_range()[1]
-    if height.min() <= 0 or height.max() >= lamp:
-        raise PrintError(f"{path} does not lie between the lamp and the wall")
-    return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
-
-
-def read_shadow(path: Path) -> np.ndarray | None:
-    """shadow.png as (H, W) bool (dark = shadow), or None when there is none."""
-    if not path.is_file():
-        return None
-    import imageio.v3 as iio
-
-    try:
-        image = np.asarray(iio.imread(path))
-    except Exception as exc:
-        raise PrintError(f"{path} is not a readable image ({exc.__class__.__name__})") from None
-    if image.ndim == 3:
-        image = image[..., :3].mean(-1)
-    return image < 128
-
-
-# -- 2. the print's frame ------------------------------------------------------------------
-
-
-@dataclasses.dataclass(frozen=True)
-class PrintFrame:
-    """Scene metres -> print millimetres: p_mm = mm_per_m * rotation @ p_m + translation.
-
-    Print axes: x to the performer's right (the image's u), y up (against the image's v),
-    z toward the lamp (the wall's normal); the table is y = 0.
-    """
-
-    mm_per_m: float
-    rotation: np.ndarray  # (3, 3)
-    translation: np.ndarray  # (3,) mm
-
-    def apply(self, points: np.ndarray) -> np.ndarray:
-        """(..., 3) metres, scene frame -> (..., 3) millimetres, print frame."""
-        return self.mm_per_m * np.asarray(points, float) @ self.rotation.T + self.translation
-
-    def direction(self, vectors: np.ndarray) -> np.ndarray:
-        """(..., 3) scene vectors (metres) -> print vectors (millimetres)."""
-        return self.mm_per_m * np.asarray(vectors, float) @ self.rotation.T
-
-    def matrix(self) -> np.ndarray:
-        """(4, 4) homogeneous form of :meth:`apply`."""
-        m = np.eye(4)
-        m[:3, :3] = self.mm_per_m * self.rotation
-        m[:3, 3] = self.translation
-        return m
-
-    def scene(self, scene: Scene) -> Scene:
-        """The scene mapped into print millimetres (same contract as scene.json)."""
-        im = scene.image
-        return Scene(
-            light=Light("point", position=tuple(self.apply(scene.light.position))),
-            wall=Wall(point=tuple(self.apply(scene.wall.point)), normal=tuple(self.rotation @ scene.wall.normal)),
-            image=ImageFrame(
-                im.width,
-                im.height,
-                tuple(self.apply(im.origin)),
-                tuple(self.direction(im.u)),
-                tuple(self.direction(im.v)),
-            ),
-        )
-
-
-def print_rotation(scene: Scene) -> np.ndarray:
-    """(3, 3) rows: the print's x, y, z axes in scene coordinates (image right, image up,
-    wall normal). Raises PrintError for a mirrored frame or a wall that is not upright."""
-    u = np.asarray(scene.image.u, float)
-    v = np.asarray(scene.image.v, float)
-    n = np.asarray(scene.wall.normal, float)
-    rotation = np.stack([u / np.linalg.norm(u), -v / np.linalg.norm(v), n / np.linalg.norm(n)])
-    if np.linalg.det(rotation) < 0.5:
-        raise PrintError("the image frame in scene.json is mirrored; a print needs a right-handed frame")
-    return rotation
-
-
-def print_frame(scene: Scene, vertices: np.ndarray, settings: PrintSettings) -> PrintFrame:
-    """The frame that makes the print ``settings.height_mm`` tall.
-
-    vertices: (V, 3) metres, all hands. With the stand the print reaches from the table (the
-    foot's underside) to the top of the image frame or of the hands, whichever is higher; the
-    foot's top stays ``margin`` below the frame's bottom edge and below the hands. Without the
-    stand it is the hands' height. x is centred on the frame; z = 0 is the board's back (or
-    the wall without a stand).
-    """
-    rotation = print_rotation(scene)
-    q = np.asarray(vertices, float) @ rotation.T
-    corners = stands.frame_corners(scene) @ rotation.T
-    wall_z = float(rotation[2] @ np.asarray(scene.wall.point, float))
-    centre_x = float(corners[:, 0].mean())
-    size = settings.stand_size
-    if settings.stand:
-        top = max(corners[:, 1].max(), q[:, 1].max())
-        bottom = min(corners[:, 1].min(), q[:, 1].min())
-        below = size.board + size.margin  # foot and gap under the frame, mm
-    else:
-        top, bottom, below = q[:, 1].max(), q[:, 1].min(), 0.0
-    if settings.height_mm < max(MIN_HEIGHT_MM, 2 * below):
-        raise PrintError(f"--height-mm must be at least {max(MIN_HEIGHT_MM, 2 * below):.0f}")
-    mm_per_m = (settings.height_mm - below) / (top - bottom)
-    back = size.board if settings.stand else 0.0
-    translation = np.array([-mm_per_m * centre_x, below - mm_per_m * bottom, back - mm_per_m * wall_z])
-    return PrintFrame(mm_per_m=float(mm_per_m), rotation=rotation, translation=translation)
 
 
 # -- 3. the solid ------------------------------------------------------------------------
@@ -269,10 +101,6 @@ class PrintModel:
     thickened: np.ndarray
 
 
-class ThinPartsError(PrintError):
-    """Parts thinner than the minimum wall whose thickening would change the shadow."""
-
-
 def build_print(result: ResultMeshes, settings: PrintSettings) -> PrintModel:
     """Unite, measure, thicken and stand the hands of a result (see the module docstring)."""
     from handshadow.render import mesh_shadow
@@ -297,142 +125,6 @@ def build_print(result: ResultMeshes, settings: PrintSettings) -> PrintModel:
         thinnest_mm=thinnest,
         thickened=thickened,
     )
-
-
-def printable_hands(
-    result: ResultMeshes, frame: PrintFrame, scene: Scene, settings: PrintSettings
-) -> tuple[m3.Manifold, float, np.ndarray]:
-    """The hands as one clean solid in print millimetres, thickened where thinner than the
-    minimum wall; also the thinnest part before thickening (mm) and the thickening balls'
-    centres (K, 3). Raises ThinPartsError, naming the parts and the smallest height that
-    works, when the thickened hands' shadow would match the fit's by less than
-    SHADOW_IOU_MIN (IoU)."""
-    from handshadow.render import mesh_shadow
-
-    reference = mesh_shadow(result.scene, *solids.side_by_side([(v, f) for _, v, f in result.meshes]))
-    hands = solids.clean_solid([(frame.apply(v), f) for _, v, f in result.meshes])
-    thickness = solids.local_thickness(hands, max_depth=10 * settings.min_wall_mm + 20)
-    cast = mesh_shadow(scene, *solids.to_arrays(hands))  # in pixels the same at any height
-    thick = thickening(thickness, scene, settings.min_wall_mm, cast, reference)
-    if len(thick.balls) and thick.shadow_iou < SHADOW_IOU_MIN:
-        where = ", ".join(name_places(result, frame, thick.centres)) or f"{len(thick.centres)} spots"
-        height = smallest_height(result, frame, thickness, cast, reference, settings)
-        raise ThinPartsError(
-            f"thinner than {settings.min_wall_mm:g} mm at {settings.height_mm:g} mm tall: {where}"
-            f" (thinnest {thick.thinnest:.2f} mm); thickened, its shadow would drift from the fit's"
-            f" (IoU {thick.shadow_iou:.3f}); print at --height-mm {height:.0f} or more"
-        )
-    if len(thick.balls):
-        hands = m3.Manifold.batch_boolean([hands, *thick.balls], m3.OpType.Add)
-    return hands, thick.thinnest, thick.centres
-
-
-@dataclasses.dataclass(frozen=True)
-class Thickening:
-    """What thickening a solid would take. thinnest: its thinnest part (mm); centres: (K, 3)
-    ball centres; balls: the balls (diameter: the minimum wall); shadow_iou: the thickened
-    solid's shadow against the reference."""
-
-    thinnest: float
-    centres: np.ndarray
-    balls: list[m3.Manifold]
-    shadow_iou: float
-
-
-def thickening(
-    thickness: solids.Thickness, scene: Scene, min_wall: float, cast: np.ndarray, reference: np.ndarray
-) -> Thickening:
-    """The balls that bring a solid's thin parts to ``min_wall`` (mm), and how well the
-    thickened solid's shadow, ``cast`` (H, W) bool (the solid's) with the balls', would match
-    ``reference`` (H, W) bool (the shadow of a union is the union of the shadows)."""
-    from handshadow.render import mesh_shadow
-
-    centres = solids.thickening_balls(thickness, min_wall)
-    balls = solids.balls(centres, min_wall / 2)
-    if balls:
-        cast = cast | mesh_shadow(scene, *solids.side_by_side([solids.to_arrays(b) for b in balls]))
-    return Thickening(float(thickness.part.min()), centres, balls, iou(cast, reference))
-
-
-def smallest_height(
-    result: ResultMeshes,
-    frame: PrintFrame,
-    thickness: solids.Thickness,
-    cast: np.ndarray,
-    reference: np.ndarray,
-    settings: PrintSettings,
-) -> float:
-    """About the smallest height (mm, up to the next 5) at which the thickened hands' shadow
-    still matches ``reference`` by SHADOW_IOU_MIN: four bisection steps between this height
-    and one at which nothing is thinner than the minimum wall. The hands' thickness (in
-    ``frame``'s coordinates) and shadow ``cast`` scale with the print; the stand's
-    millimetres do not."""
-    vertices = np.concatenate([v for _, v, _ in result.meshes])
-
-    def works(height: float) -> bool:
-        other = print_frame(result.scene, vertices, dataclasses.replace(settings, height_mm=height))
-        moved = thickness.moved(other.mm_per_m / frame.mm_per_m, frame.translation, other.translation)
-        match = thickening(moved, other.scene(result.scene), settings.min_wall_mm, cast, reference).shadow_iou
-        return match >= SHADOW_IOU_MIN + 0.002  # a little to spare: the measure is not smooth in the height
-
-    below = settings.stand_size.board + settings.stand_size.margin if settings.stand else 0.0
-    low = settings.height_mm
-    high = max(low * 1.1, below + (low - below) * settings.min_wall_mm / thickness.part.min() * 1.05)
-    for _ in range(5):
-        middle = 0.5 * (low + high)
-        low, high = (low, middle) if works(middle) else (middle, high)
-    return float(5 * np.ceil(high / 5))
-
-
-def name_places(result: ResultMeshes, frame: PrintFrame, points: np.ndarray) -> list[str]:
-    """Names of the hand parts nearest to points (K, 3) in print millimetres ("left index",
-    "right palm", "left forearm"), most points first; empty when the result's pose.json
-    cannot be posed here (the names are a courtesy, not a requirement)."""
-    from handshadow.hands.rig import FINGERS
-    from handshadow.posefile import load_pose_file
-
-    if len(points) == 0:
-        return []
-    try:
-        pose_set = load_pose_file(result.folder / "pose.json")
-        keypoints = {h.side: frame.apply(_keypoints(h, pose_set.forearm)) for h in pose_set.hands}
-    except (HandshadowError, OSError, ValueError):
-        return []
-    labels = []
-    for p in np.asarray(points, float):
-        best = (np.inf, "")
-        for side, k in keypoints.items():
-            for f, finger in enumerate(FINGERS):
-                chain = k[[0, *range(1 + 4 * f, 5 + 4 * f)]]  # wrist, the finger's joints, its tip
-                d, t = _to_polyline(p, chain)
-                name = f"{side} {finger}" if t >= 1 else (f"{side} palm" if t > 0 else f"{side} forearm")
-                best = min(best, (d, name))
-        labels.append(best[1])
-    names, counts = np.unique(labels, return_counts=True)
-    return [str(n) for n in names[np.argsort(-counts, kind="stable")]]
-
-
-def _keypoints(hand, forearm: bool) -> np.ndarray:
-    """(21, 3) keypoints of a posed hand, scene metres."""
-    import torch
-
-    from handshadow.hands import load_hand
-
-    model = load_hand(hand.model, hand.side, hand.shape, forearm=forearm, dtype=torch.float64)
-    with torch.no_grad():
-        return model(*hand.tensors(dtype=torch.float64)).keypoints[0].numpy()
-
-
-def _to_polyline(p: np.ndarray, chain: np.ndarray) -> tuple[float, float]:
-    """Distance from p (3,) to the polyline chain (N, 3), and where its nearest point lies as
-    segment index plus fraction (below 0: before the first point)."""
-    best = (np.inf, 0.0)
-    for i, (a, b) in enumerate(zip(chain[:-1], chain[1:])):
-        t_raw = float((p - a) @ (b - a) / max((b - a) @ (b - a), 1e-12))
-        t = min(max(t_raw, 0.0), 1.0)
-        d = float(np.linalg.norm(a + t * (b - a) - p))
-        best = min(best, (d, i + t if i or t_raw >= 0 else t_raw))
-    return best
 
 
 def _stand(
