@@ -1,5 +1,5 @@
 """Fit benchmark: fit every image in the given folders with default settings and judge each
-result as shared/notes/metrics.md defines (IoU, boundary F1 at 2 px, HD95, thin-part recall,
+result as docs/metrics.md defines (IoU, boundary F1 at 2 px, HD95, thin-part recall,
 success).
 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--hands 2] [--out out/bench]
@@ -77,7 +77,7 @@ def main() -> None:
             "thin": s.thin_recall,
             "success": s.success,
             "seconds": seconds,
-            "hands": len(result.pose_set.hands),
+            "hands": len(result.posed.hands),
         }
         rows.append(row)
         print(

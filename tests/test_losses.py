@@ -55,3 +55,55 @@ def test_notches_mark_holes_and_narrow_gaps_not_open_ground():
     assert losses.notches(t)[60, 34] > n[60, 34]
     assert n[60, 62] == 0  # the wide gap between the two shapes
     assert n[5, 5] == 0 and n[90, 50] == 0  # open ground
+
+
+def _maps(target):
+    import numpy as np
+
+    from handshadow.losses import TargetMaps
+
+    return TargetMaps.build(np.asarray(target, bool))
+
+
+def test_attraction_pulls_toward_missing_parts_only():
+    target = _solid_target()
+    shadow = target.clone()[None]
+    shadow[0, 4:28, 20:28] = 0  # the right third of the target is missing
+    shadow.requires_grad_(True)
+    losses.attraction(shadow, target, 3.0).sum().backward()
+    g = shadow.grad[0]
+    # More coverage next to the missing part lowers the loss; far from it, nothing changes.
+    assert float(g[16, 20]) < 0 and float(g[16, 20]) < float(g[16, 8])
+    assert float(g[16, 5]) == 0.0 or abs(float(g[16, 5])) < 1e-4 * abs(float(g[16, 20]))
+
+
+def test_placement_counts_only_vertices_outside_the_range():
+    heights = torch.tensor([[0.5, 1.0, 1.5], [0.5, -0.01, 2.01]])
+    out = losses.placement(heights, 0.0, 2.0)
+    assert float(out[0]) == 0.0
+    # 1 cm below and 1 cm beyond: each one unit squared, averaged over 3 vertices, times 10.
+    assert float(out[1]) == pytest_approx(2 / 3 * 10)
+
+
+def pytest_approx(x):
+    import pytest
+
+    return pytest.approx(x, rel=1e-5)
+
+
+def test_thin_coverage_is_zero_when_a_finger_lies_on_the_thin_part():
+    import numpy as np
+
+    yy, xx = np.mgrid[:64, :64]
+    t = (yy - 42) ** 2 + (xx - 31) ** 2 <= 15**2  # a round body (an opening keeps it whole)
+    t[5:30, 30:32] = True  # a thin ear, 2 px wide, x 30..31, y 5..29
+    maps = _maps(t)
+    assert maps.thin_points.shape[0] > 0
+    on = torch.tensor([[[[31.0, 4.0], [31.0, 29.0]]]])  # a finger segment along the ear
+    off = torch.tensor([[[[5.0, 60.0], [20.0, 60.0]]]])  # one far below
+    near = float(losses.thin_coverage(on, maps)[0])
+    far = float(losses.thin_coverage(off, maps)[0])
+    assert near < 1e-3 * far and near < 1e-4
+    # With no thin parts there is nothing to reach.
+    blob = _maps((yy - 32) ** 2 + (xx - 32) ** 2 <= 20**2)  # a disc has no thin parts
+    assert float(losses.thin_coverage(off, blob)[0]) == 0.0

@@ -47,3 +47,23 @@ def test_near_miss_is_a_failure_within_reach():
     assert not near(0.9, 0.035, 0.4)  # thin parts missed
     assert not near(0.75, 0.035, 0.9)  # IoU missed
     assert not near(0.9, 0.025, 0.9)  # a success
+
+
+def test_one_iou_for_masks_batches_and_tensors():
+    import torch
+
+    from handshadow.metrics import iou
+
+    a = np.zeros((8, 8), bool)
+    a[2:6, 2:6] = True
+    b = np.zeros((8, 8), bool)
+    b[4:8, 4:8] = True
+    assert iou(a, b) == 4 / 28
+    empty = np.zeros((8, 8), bool)
+    assert iou(empty, empty) == 1.0  # two empty masks agree
+    batch = np.stack([a, b, empty])
+    assert np.allclose(iou(batch, a), [1.0, 4 / 28, 0.0])
+    t = iou(torch.as_tensor(np.stack([a, empty])), torch.as_tensor(empty))
+    assert torch.equal(t, torch.tensor([0.0, 1.0]))
+    soft = torch.as_tensor(a, dtype=torch.float32) * 0.5  # coverage: the soft IoU
+    assert float(iou(soft, torch.as_tensor(a))) == 0.5

@@ -1,80 +1,171 @@
-"""The search's last steps: the polish aimed at the success test never hands back worse."""
+"""The search's parts: the objective's named terms, the parameters' limits, the stages, and
+the finishing steps (separation, polish) that never hand back worse."""
 
+import dataclasses
+
+import numpy as np
+import pytest
 import torch
 
-from handshadow.fit import FitConfig, make_searcher
-from handshadow.metrics import score
-from handshadow.search import HandPoses, rank_key
+from handshadow.fit import FitConfig, fit_frame, make_problem
+from handshadow.hands.limits import JointLimits
+from handshadow.metrics import rank_key, score
+from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
+from handshadow.search import Interrupted, Stage, finishing, objective, polish, separate
+from handshadow.search import stages as stages_module
 from tests.test_fit import known_target
 
 SIZE = 96
 
 
-def _searcher_and_truth(name="dog"):
+def _problem_and_truth(name="dog"):
     target, truth = known_target(name, SIZE)
-    searcher = make_searcher(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
-    poses = [HandPoses(*h.tensors()) for h in truth.hands]
-    return searcher, poses
+    problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
+    poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
+    return problem, poses
 
 
-def _key(searcher, poses):
-    return rank_key(score(searcher.shadows(poses)[0].numpy() > 0.5, searcher.target))
+def _key(problem, poses):
+    return rank_key(score(problem.shadows(poses)[0].numpy() > 0.5, problem.target))
+
+
+def _moved(poses, dx=0.03, curl=1.0):
+    return PoseBatch(
+        [
+            HandPoseBatch(h.pose_rad * curl, h.rotation, h.translation + torch.tensor([dx, 0.0, 0.0]), h.wrist_rad)
+            for h in poses.hands
+        ]
+    )
+
+
+def test_objective_names_its_terms_and_they_sum_to_the_total():
+    problem, truth = _problem_and_truth()
+    stage = Stage(height=64, blur_px=4, attract_px=8, steps=1, keep=1)
+    terms, shadow = objective(problem, truth.hands, stage)
+    assert shadow.mask.shape == (1, 64, 64)
+    values = terms.values(0)
+    assert set(values) >= {"image", "excess", "penetration", "placement", "inside", "thin_pull"}
+    assert sum(values.values()) == pytest.approx(float(terms.total[0]), rel=1e-5)
+    # The true pose: its shadow is the target's, so the image term is small, the off pose's larger.
+    off, _ = objective(problem, _moved(truth, 0.06).hands, stage)
+    assert float(off.image[0]) > 3 * float(terms.image[0])
+    assert float(off.total[0]) > float(terms.total[0])
+
+
+def test_parameters_keep_a_pose_at_its_limits_through_ten_rebuilds():
+    limits = JointLimits.preset("paper", "right")
+    lo, hi = limits.joints[..., 0], limits.joints[..., 1]
+    pose = torch.where(torch.arange(45).reshape(15, 3) % 2 == 0, lo, hi)[None]  # every joint at a limit
+    wrist = limits.wrist[:, 0][None].clone()
+    start = PoseBatch([HandPoseBatch(pose, torch.eye(3)[None], torch.tensor([[0.0, 0.0, 1.0]]), wrist)])
+    poses = start
+    for _ in range(10):
+        poses = PoseParameters(poses, [limits]).poses()
+    assert torch.equal(poses.hands[0].pose_rad, pose)
+    assert torch.equal(poses.hands[0].wrist_rad, wrist)
+    # ... and inside the limits any value reads back as itself (to float rounding).
+    mid = PoseBatch([HandPoseBatch(0.5 * (lo + hi)[None], torch.eye(3)[None], torch.zeros(1, 3), torch.zeros(1, 2))])
+    assert torch.allclose(PoseParameters(mid, [limits]).poses().hands[0].pose_rad, mid.hands[0].pose_rad, atol=1e-6)
+
+
+def test_parameters_stay_within_the_limits_whatever_the_step():
+    limits = JointLimits.preset("anatomical", "right")
+    start = PoseBatch(
+        [HandPoseBatch(torch.zeros(4, 15, 3), torch.eye(3).expand(4, 3, 3), torch.zeros(4, 3), torch.zeros(4, 2))]
+    )
+    params = PoseParameters(start, [limits])
+    with torch.no_grad():
+        for p in params.parameters()[:2]:
+            p.add_(torch.randn(p.shape) * 50)
+    hand = params.hand(0)
+    assert bool(((hand.pose_rad >= limits.joints[..., 0]) & (hand.pose_rad <= limits.joints[..., 1])).all())
+    assert bool(((hand.wrist_rad >= limits.wrist[:, 0]) & (hand.wrist_rad <= limits.wrist[:, 1])).all())
+
+
+def test_separate_parts_hands_that_pass_through_each_other_and_keeps_the_shadow():
+    target, truth = known_target("bird", SIZE)  # the library's bird: palms 18 mm into each other
+    problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
+    poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
+    assert problem.mesh_penetration(poses)[0].between_mm > 10
+    apart = separate(problem, poses)
+    assert problem.mesh_penetration(apart)[0].deepest_mm <= 3.0
+    assert score(problem.shadows(apart)[0].numpy() > 0.5, target).success
+    # A pose that passes comes back as it is.
+    assert separate(problem, apart) is apart
+
+
+def test_separate_opens_a_fist_curled_into_its_palm():
+    target, truth = known_target("rabbit", SIZE)  # ring and little finger 12 mm into the palm
+    problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
+    poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
+    assert problem.mesh_penetration(poses)[0].within_mm[0] > 10
+    apart = separate(problem, poses)
+    assert problem.mesh_penetration(apart)[0].deepest_mm <= 3.0
+    assert score(problem.shadows(apart)[0].numpy() > 0.5, target).iou > 0.95
+
+
+def test_a_fit_whose_search_ends_in_penetration_comes_out_apart(monkeypatch):
+    from handshadow import fit as fit_module
+
+    target, truth = known_target("bird", SIZE)
+    inside = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])  # palms 18 mm deep
+    real_search, real_separate, seen = fit_module.run_stages, fit_module.separate, []
+
+    def search_ending_inside(problem, starts, stages, **kw):
+        result = real_search(problem, starts, stages, **kw)
+        result.poses = inside
+        return result
+
+    def watched(problem, poses, **kw):
+        seen.append(problem.mesh_penetration(poses)[0].deepest_mm)
+        return real_separate(problem, poses, **kw)
+
+    monkeypatch.setattr(fit_module, "run_stages", search_ending_inside)
+    monkeypatch.setattr(fit_module, "separate", watched)
+    result = fit_frame(target, FitConfig(hands="2", size=SIZE, quality="fast", iters=6))
+    assert seen and seen[0] > 10  # the search's result had the hands inside each other
+    assert result.penetration.deepest_mm <= 3.0 and result.penetration.performable()
+    assert result.posed.fit["penetration_mm"] == round(result.penetration.deepest_mm, 2)
+    assert result.posed.fit["performable"] == result.performable
+    assert result.score == score(result.shadow, target)  # the shadow is scored as written
+    assert result.score.success
 
 
 def test_polish_improves_a_failing_pose_and_keeps_a_passing_one():
-    searcher, truth = _searcher_and_truth()
-    assert not _key(searcher, truth)[0]  # the true pose passes the success test
-    assert searcher.polish(truth) is truth  # ... and is left alone
-
-    # Knocked off: the hand slides 3 cm sideways and the fingers curl a little.
-    off = [
-        HandPoses(p.pose_rad * 1.15, p.rotation, p.translation + torch.tensor([0.03, 0.0, 0.0]), p.wrist_rad)
-        for p in truth
-    ]
-    before = _key(searcher, off)
+    problem, truth = _problem_and_truth()
+    assert not _key(problem, truth)[0]  # the true pose passes the success test
+    assert polish(problem, truth) is truth  # ... and is left alone
+    off = _moved(truth, 0.03, 1.15)  # the hand slides 3 cm sideways and the fingers curl a little
+    before = _key(problem, off)
     assert before[0], "the knocked-off pose should fail the success test"
-    polished = searcher.polish(off, rounds=1, steps=24, copies=2)
-    after = _key(searcher, polished)
-    assert after < before  # strictly better by the ranking
-    assert float(searcher.penetration_mm(polished).max()) <= max(1.0, float(searcher.penetration_mm(off).max()))
+    settings = finishing.Finishing(steps=24, copies=2)
+    polished = polish(problem, off, rounds=1, settings=settings)
+    assert _key(problem, polished) < before  # strictly better by the ranking
+    assert float(problem.penetration_mm(polished).max()) <= max(1.0, float(problem.penetration_mm(off).max()))
 
 
 def test_ctrl_c_in_the_polish_hands_back_poses(monkeypatch):
-    import pytest
-
-    from handshadow.search import Interrupted, Searcher
-
-    searcher, truth = _searcher_and_truth()
-    off = [
-        HandPoses(p.pose_rad, p.rotation, p.translation + torch.tensor([0.03, 0.0, 0.0]), p.wrist_rad) for p in truth
-    ]
+    problem, truth = _problem_and_truth()
+    off = _moved(truth)
     calls = {"n": 0}
-    objective = Searcher.objective
+    real = finishing.objective
 
-    def interrupted_on_the_third_step(self, *args, **kwargs):
+    def interrupted_on_the_third_step(*args, **kwargs):
         calls["n"] += 1
         if calls["n"] == 3:
             raise KeyboardInterrupt
-        return objective(self, *args, **kwargs)
+        return real(*args, **kwargs)
 
-    monkeypatch.setattr(Searcher, "objective", interrupted_on_the_third_step)
+    monkeypatch.setattr(finishing, "objective", interrupted_on_the_third_step)
     with pytest.raises(Interrupted) as stop:
-        searcher.polish(off, rounds=1, steps=10, copies=2)
-    assert len(stop.value.poses) == 1 and stop.value.poses[0].pose_rad.shape == (1, 15, 3)
-    # What it hands back scores no worse than where it started.
-    assert _key(searcher, stop.value.poses) <= _key(searcher, off)
+        polish(problem, off, rounds=1, settings=finishing.Finishing(steps=10, copies=2))
+    assert stop.value.poses.batch == 1 and stop.value.poses.hands[0].pose_rad.shape == (1, 15, 3)
+    assert _key(problem, stop.value.poses) <= _key(problem, off)  # no worse than where it started
 
 
 def test_stop_ends_the_polish_at_once_with_the_best_so_far():
-    import pytest
-
-    from handshadow.search import Interrupted
-
-    searcher, truth = _searcher_and_truth()
-    off = [
-        HandPoses(p.pose_rad * 1.15, p.rotation, p.translation + torch.tensor([0.03, 0.0, 0.0]), p.wrist_rad)
-        for p in truth
-    ]
+    problem, truth = _problem_and_truth()
+    off = _moved(truth, 0.03, 1.15)
     asked = []
 
     def stop():  # the app's Cancel button, pressed during the third step
@@ -82,81 +173,109 @@ def test_stop_ends_the_polish_at_once_with_the_best_so_far():
         return len(asked) >= 3
 
     with pytest.raises(Interrupted) as halt:
-        searcher.polish(off, rounds=1, steps=24, copies=2, stop=stop)
-    assert len(asked) == 3  # asked before every step, obeyed at once
-    assert [p.pose_rad.shape for p in halt.value.poses] == [(1, 15, 3)] * len(off)
+        polish(problem, off, rounds=1, settings=finishing.Finishing(steps=24, copies=2), stop=stop)
+    assert len(asked) == 3  # asked at every step, obeyed at once
+    assert [h.pose_rad.shape for h in halt.value.poses.hands] == [(1, 15, 3)] * off.n_hands
 
 
 def test_stop_ends_a_fit_early_and_marks_it_interrupted(monkeypatch):
-    from handshadow.fit import fit_frame
-    from handshadow.search import Searcher
+    from handshadow import fit as fit_module
 
     target, _ = known_target("dog", SIZE)
-    asked, finishing = [], []
+    asked, finished = [], []
 
     def stop():
         asked.append(1)
         return len(asked) > 5
 
-    separate, polish = Searcher.separate, Searcher.polish
+    real_separate, real_polish = fit_module.separate, fit_module.polish
     monkeypatch.setattr(
-        Searcher, "separate", lambda self, p, **k: finishing.append(("separate", k)) or separate(self, p, **k)
+        fit_module, "separate", lambda *a, **k: finished.append(("separate", k)) or real_separate(*a, **k)
     )
-    monkeypatch.setattr(
-        Searcher, "polish", lambda self, p, **k: finishing.append(("polish", k)) or polish(self, p, **k)
-    )
+    monkeypatch.setattr(fit_module, "polish", lambda *a, **k: finished.append(("polish", k)) or real_polish(*a, **k))
     result = fit_frame(target, FitConfig(hands="1", size=SIZE, quality="fast"), stop=stop)
-    assert result.interrupted and result.pose_set.fit["interrupted"] is True
+    assert result.interrupted and result.posed.fit["interrupted"] is True
     assert result.steps == 6  # the search obeys on its sixth step
     assert result.shadow.shape == target.shape and result.shadow.any()
     # After a stopped search the separation still runs to its end (a result must not
     # penetrate, although the stop stays pressed) and no polish follows.
-    assert finishing == [("separate", {"stop": None})]
+    assert finished == [("separate", {"stop": None})]
 
 
 def test_time_limit_ends_search_and_polish_without_marking_an_interruption():
-    from handshadow.fit import fit_frame
-
     target, _ = known_target("dog", SIZE)
     result = fit_frame(target, FitConfig(hands="1", size=SIZE, quality="fast", time_limit_s=1e-6))
     assert result.steps == 1 and not result.interrupted  # the deadline is checked after each step
     assert result.shadow.any()
 
 
+def test_progress_sees_the_loss_terms_by_name():
+    target, _ = known_target("dog", SIZE)
+    seen = []
+    fit_frame(target, FitConfig(hands="1", size=SIZE, quality="fast", iters=12), progress=seen.append)
+    assert seen and {"image", "penetration"} <= set(seen[-1].terms)
+    assert seen[-1].done == 12 and seen[-1].poses.batch == 1
+
+
+def test_the_stages_rank_by_the_fit_measures():
+    problem, truth = _problem_and_truth()
+    poses = PoseBatch.cat([_moved(truth, 0.08), truth, _moved(truth, 0.03)])
+    assert stages_module.rank_at(problem, poses, SIZE) == [1, 2, 0]
+
+
 def _scripted_rounds(monkeypatch, hd95s):
     """Make each polish round return the next HD95 of ``hd95s`` (IoU 0.9, thin 0.9); count them."""
     from handshadow.metrics import FitScore
-    from handshadow.search import Searcher
 
     played = []
 
-    def round_(self, poses, best_score, *args):
+    def round_(problem, poses, best_score, *args):
         played.append(hd95s[len(played)])
         return FitScore(iou=0.9, boundary_f1=0.5, hd95=played[-1], thin_recall=0.9), poses
 
-    monkeypatch.setattr(Searcher, "_polish_round", round_)
+    monkeypatch.setattr(finishing, "polish_round", round_)
     return played
 
 
 def test_polish_rounds_go_on_only_for_an_improving_near_miss(monkeypatch):
-    searcher, truth = _searcher_and_truth()
-    off = [
-        HandPoses(p.pose_rad, p.rotation, p.translation + torch.tensor([0.03, 0.0, 0.0]), p.wrist_rad) for p in truth
-    ]
-    start = score(searcher.shadows(off)[0].numpy() > 0.5, searcher.target)
+    problem, truth = _problem_and_truth()
+    off = _moved(truth)
+    start = score(problem.shadows(off)[0].numpy() > 0.5, problem.target)
     assert not start.near_miss and not start.success  # far from the bar
     # A near miss that keeps improving gets every further round.
     played = _scripted_rounds(monkeypatch, [0.038, 0.036, 0.034, 0.033, 0.032, 0.031, 0.0305])
-    searcher.polish(off, rounds=2, near_rounds=4)
+    polish(problem, off, rounds=2, near_rounds=4)
     assert len(played) == 6
     # ... but stops when a round brings nothing.
     played = _scripted_rounds(monkeypatch, [0.038, 0.036, 0.036, 0.036, 0.036, 0.036])
-    searcher.polish(off, rounds=2, near_rounds=4)
+    polish(problem, off, rounds=2, near_rounds=4)
     assert len(played) == 3
     # A result far from the bar gets only the base rounds; a success ends the polish at once.
     played = _scripted_rounds(monkeypatch, [0.09, 0.08, 0.07, 0.06])
-    searcher.polish(off, rounds=2, near_rounds=4)
+    polish(problem, off, rounds=2, near_rounds=4)
     assert len(played) == 2
     played = _scripted_rounds(monkeypatch, [0.036, 0.029, 0.028])
-    searcher.polish(off, rounds=2, near_rounds=4)
+    polish(problem, off, rounds=2, near_rounds=4)
     assert len(played) == 2
+
+
+def test_fit_frame_leaves_the_global_random_state_alone():
+    target, _ = known_target("dog", 64)
+    torch.manual_seed(123)
+    expected = torch.rand(3)
+    torch.manual_seed(123)
+    fit_frame(target, FitConfig(hands="1", size=64, quality="fast", iters=3, seed=7))
+    assert torch.equal(torch.rand(3), expected)
+
+
+def test_result_shadow_and_score_are_those_of_the_pose_file():
+    from handshadow.hands.posed import cast_shadow
+    from handshadow.posefile import parse_pose
+
+    target, _ = known_target("dog", 64)
+    result = fit_frame(target, FitConfig(hands="1", size=64, quality="fast", iters=20))
+    _, mask = cast_shadow(parse_pose(result.posed.to_json()))
+    assert np.array_equal(mask > 0.5, result.shadow)
+    assert result.score == score(result.shadow, target)
+    assert result.posed.fit["iou"] == round(result.score.iou, 4)
+    assert dataclasses.asdict(result.score)["hd95"] == result.score.hd95

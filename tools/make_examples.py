@@ -10,8 +10,8 @@ import torch
 
 from handshadow.examples import TARGETS
 from handshadow.export.files import shadow_image
+from handshadow.hands.posed import cast_shadow
 from handshadow.library import library_about, load_library_pose
-from handshadow.pipeline import exact_shadow, pose_hands
 
 EXAMPLES = ("rabbit", "dog", "bird", "swan", "deer", "wolf", "duck", "crocodile", "butterfly", "snail")
 
@@ -20,7 +20,7 @@ if __name__ == "__main__":
     for name in EXAMPLES:
         pose_set = load_library_pose(name)
         with torch.no_grad():
-            mask = exact_shadow(pose_set.scene, pose_hands(pose_set))
+            mask = cast_shadow(pose_set)[1]
         iio.imwrite(TARGETS / f"{name}.png", shadow_image(mask))
         (TARGETS / f"{name}.txt").write_text(
             library_about(name).split(":")[0] + " (the shadow of the library pose '" + name + "')\n"

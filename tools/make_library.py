@@ -1,5 +1,6 @@
 """Author the library of classic hand-shadow poses (src/handshadow/data/library/*.json) and
-render a contact sheet of their shadows (out/library.png) to look at.
+render a contact sheet of their shadows (out/library.png) to look at. Each authored pose is
+made one a person can hold (the fit's finishing steps) before it is written.
 
 Conventions (docs/conventions.md): world +y up, +x right as the performer sees the wall, the
 lamp at +z. A hand frame has +y toward the fingertips and +z out of the back of the hand; the
@@ -415,11 +416,36 @@ POSES = {
 }
 
 
+def holdable(data: dict) -> tuple[dict, str]:
+    """The authored pose made one a person can hold (docs/performing.md): the finishing steps
+    of a fit part hands that pass through each other and open fingers curled into the palm,
+    then the polish brings the shadow back toward the authored one. Returns the pose data and
+    a line on what changed."""
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.hands.posed import cast_shadow
+    from handshadow.posefile import parse_pose
+    from handshadow.poses import HandPoseBatch, PoseBatch
+    from handshadow.search import polish, separate
+
+    posed = parse_pose(data)
+    target = cast_shadow(posed)[1] > 0.5
+    sides = [h.side for h in posed.hands]
+    problem = make_problem(target, posed.scene, sides, FitConfig(size=posed.scene.image.height))
+    poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in posed.hands])
+    before = problem.mesh_penetration(poses)[0].deepest_mm
+    poses = polish(problem, separate(problem, poses), rounds=3, always=True)
+    after = problem.mesh_penetration(poses)[0].deepest_mm
+    hands = [h.to_json() for b, side in zip(poses.hands, sides) for h in b.to_hand_poses(side, "anny")]
+    shadow = problem.shadows(poses)[0].numpy() > 0.5
+    iou = float((shadow & target).sum() / (shadow | target).sum())
+    return {**data, "hands": hands}, f"penetration {before:.1f} -> {after:.1f} mm, shadow IoU {iou:.3f}"
+
+
 if __name__ == "__main__":
     import imageio.v3 as iio
     import torch
 
-    from handshadow.pipeline import exact_shadow, pose_hands
+    from handshadow.hands.posed import cast_shadow
     from handshadow.posefile import parse_pose
 
     LIBRARY.mkdir(parents=True, exist_ok=True)
@@ -433,14 +459,15 @@ if __name__ == "__main__":
             "forearm": True,
             "hands": hands,
         }
+        data, change = holdable(data)
         (LIBRARY / f"{name}.json").write_text(json.dumps(data, indent=1) + "\n")
         pose_set = parse_pose({**data, "scene": scene.to_json()})
         with torch.no_grad():
-            mask = exact_shadow(scene, pose_hands(pose_set))
+            mask = cast_shadow(pose_set)[1]
         tile = (1 - mask) * 255
         tile[:2], tile[:, :2] = 128, 128
         tiles.append(tile)
-        print(f"{name:10s} {about}")
+        print(f"{name:10s} {change}  {about}")
     cols = 5
     while len(tiles) % cols:
         tiles.append(np.full_like(tiles[0], 255))

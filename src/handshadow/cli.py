@@ -21,13 +21,11 @@ EXIT_INTERRUPTED = 130
 def cmd_render(args: argparse.Namespace) -> int:
     from handshadow.posefile import load_pose_file
 
-    pose_set = load_pose_file(examples.pose_path(args.pose), frame=args.frame)  # checked before the heavy imports
-    from handshadow.pipeline import render_pose_set
+    posed = load_pose_file(examples.pose_path(args.pose), frame=args.frame)  # checked before the heavy imports
+    from handshadow.pipeline import render_to_folder
 
-    out = render_pose_set(pose_set, args.out, force=args.force, mano_dir=args.mano_dir)
-    print(
-        f"wrote {out}/: shadow.png scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in pose_set.hands)
-    )
+    out = render_to_folder(posed, args.out, force=args.force, mano_dir=args.mano_dir)
+    print(f"wrote {out}/: shadow.png scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in posed.hands))
     return 0
 
 
@@ -58,11 +56,10 @@ def resolve_device(name: str) -> str:
 
 def cmd_fit(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
-    from handshadow.target import load_target
 
     out = Path(args.out) if args.out else Path("out") / Path(args.target).stem
     ResultFolder(out, args.force)  # refuse a non-empty folder before any work
-    load_target(examples.target_path(args.target), 64, 64, args.invert)  # bad targets fail fast, before torch loads
+    _check_target(args.target, args.invert)  # bad targets fail fast, before torch loads
     config = _fit_config(args)
     from handshadow.pipeline import fit_to_folder
 
@@ -71,12 +68,41 @@ def cmd_fit(args: argparse.Namespace) -> int:
     )
     s = result.score
     if not args.quiet:
-        state = "interrupted; best so far" if result.interrupted else ("success" if s.success else "done")
+        state = "interrupted; best so far" if result.interrupted else ("success" if result.success else "done")
         print(f"{state}: {s}, {result.steps} steps, {result.seconds:.0f} s")
+        for line in performance_lines(result):
+            print(line)
         for line in lines:
             print(line)
         print(f"results in {folder}/ (guide.png shows how to hold your hands)")
     return EXIT_INTERRUPTED if result.interrupted else 0
+
+
+def performance_lines(result) -> list[str]:
+    """What the CLI says about holding the pose: penetration, arms, performers."""
+    pen, arms = result.penetration, result.arms
+    held = "within what skin gives" if pen.performable() else "the hands pass through each other: not performable"
+    lines = [f"deepest penetration {pen.deepest_mm:.1f} mm ({held})"]
+    if arms.performers > 1:
+        lines.append(
+            f"the elbows are {arms.span_m:.2f} m apart: more than one person reaches"
+            + (" (two performers, as asked)" if result.problem.reach.performers > 1 else "; try --performers 2")
+        )
+    if not all(arms.leads_back):
+        lines.append("a forearm points toward the wall: the elbow should be on your side of the hand")
+    if not arms.upper_arms_hidden:
+        lines.append("an elbow's shadow falls in the picture: your upper arm may show there too")
+    return lines
+
+
+def _check_target(source: str, invert: bool | None = None) -> None:
+    """Read a target once, small, before the heavy imports: an unusable one raises its
+    one-line error; an unsure reading prints its one-line warning."""
+    from handshadow.target import read_target
+
+    target = read_target(examples.target_path(source), 64, 64, invert)
+    if target.warning:
+        print(f"handshadow: warning: {source}: {target.warning}", file=sys.stderr)
 
 
 def _fit_config(args: argparse.Namespace):
@@ -98,6 +124,7 @@ def _fit_config(args: argparse.Namespace):
         light=args.light,
         forearm=not args.no_forearm,
         quality=args.quality,
+        performers=args.performers,
     )
     if config.hand_model == "mano":
         from handshadow.hands import load_rig
@@ -109,12 +136,11 @@ def _fit_config(args: argparse.Namespace):
 
 def cmd_interpolate(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
-    from handshadow.target import load_target
 
     out = Path(args.out) if args.out else Path("out") / f"{Path(args.a).stem}-to-{Path(args.b).stem}"
     ResultFolder(out, args.force)
     for source in (args.a, args.b):
-        load_target(examples.target_path(source), 64, 64)
+        _check_target(source)
     config = _fit_config(args)
     from handshadow.pipeline import interpolate_to_folder
 
@@ -151,8 +177,16 @@ def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", qu
     p.add_argument("--limits", default="anatomical", choices=["anatomical", "paper"], help="joint-limit preset")
     p.add_argument("--light", default="point", choices=["point", "directional"])
     p.add_argument("--no-forearm", action="store_true", help="hands without forearms")
+    p.add_argument(
+        "--performers",
+        type=int,
+        default=1,
+        choices=[1, 2],
+        help="people holding the hands (default 1; 2 lifts the limit on how far apart the arms are)",
+    )
     p.add_argument("--force", action="store_true", help="write into a non-empty folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log details")
 
 
 def cmd_print(args: argparse.Namespace) -> int:
@@ -171,8 +205,7 @@ def cmd_app(args: argparse.Namespace) -> int:
         raise HandshadowError(f"--port must be 1..65535, got {args.port}")
     from handshadow.app import launch
 
-    print(f"handshadow app on http://{args.host}:{args.port or 7860} (Ctrl-C to stop)")
-    launch(args.host, args.port, block=True)
+    launch(args.host, args.port, block=True)  # prints its address once it listens
     return 0
 
 
@@ -219,7 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-wall-mm", type=float, default=1.2, help="thinnest part the printer makes (default 1.2)")
     p.set_defaults(func=cmd_print)
 
-    p = sub.add_parser("app", help="a local web page to make hand shadows")
+    p = sub.add_parser("app", help="a local web page to make hand shadows (needs the [app] extra: Gradio)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1, this computer only)")
     p.add_argument("--port", type=int, help="port (default: 7860 or the next free one)")
     p.set_defaults(func=cmd_app)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from handshadow.hands.rig import FINGERS
-from handshadow.posefile import HandPose
+from handshadow.poses import HandPose
 from handshadow.scene import Scene
 
 _DIRS = {

@@ -18,29 +18,37 @@ from scipy import ndimage
 
 from handshadow import losses
 from handshadow.hands.kinematics import rotation_angle_deg, rotmat_to_rotvec, slerp_rotations
-from handshadow.metrics import score
+from handshadow.hands.penetration import TOLERANCE_MM, Contacts, contact_penalty
+from handshadow.metrics import iou, score
+from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
 from handshadow.render import gaussian_blur
-from handshadow.search import HandPoses, Hypotheses, Interrupted, Searcher
+from handshadow.search import Interrupted, Problem
+from handshadow.search.loop import optimise
+from handshadow.search.problem import resize_coverage
 
 STEP_LIMIT_DEG = 8.0  # the hinge starts here, under the 10-degree bar
-PENETRATION_MM = 2.0  # a frame whose proxies overlap deeper than this counts as penetrating
+CONTACT_ROUNDS = 6  # at most this many rounds of pushing the exact test's contacts out
+CONTACT_STEPS = 25
+TRAVEL_PER_RADIAN_M = 0.02  # in the smoothness terms, this much wrist travel weighs like a radian
+PATH_LR_SCALE = 0.3  # the refinement's learning rates, as a share of the search's
+MORPH_BLUR_PX = 2.0  # full-resolution pixels of blur on the morph's shadows and targets
 
 
-def straight_path(a: list[HandPoses], b: list[HandPoses], frames: int) -> list[HandPoses]:
+def straight_path(a: PoseBatch, b: PoseBatch, frames: int) -> PoseBatch:
     """Blend per hand from a (batch 1) to b (batch 1) over ``frames`` frames (batch = frames)."""
-    t = torch.linspace(0, 1, frames, dtype=a[0].pose_rad.dtype, device=a[0].pose_rad.device)
+    t = torch.linspace(0, 1, frames, dtype=a.hands[0].pose_rad.dtype, device=a.hands[0].pose_rad.device)
     out = []
-    for ha, hb in zip(a, b):
+    for ha, hb in zip(a.hands, b.hands):
         lerp = lambda x, y: x + (y - x) * t.view(-1, *([1] * (x.dim() - 1)))  # noqa: E731
         out.append(
-            HandPoses(
+            HandPoseBatch(
                 lerp(ha.pose_rad, hb.pose_rad),
                 slerp_rotations(ha.rotation[0], hb.rotation[0], t),
                 lerp(ha.translation, hb.translation),
                 lerp(ha.wrist_rad, hb.wrist_rad),
             )
         )
-    return out
+    return PoseBatch(out)
 
 
 def morph_targets(a: np.ndarray, b: np.ndarray, frames: int) -> np.ndarray:
@@ -62,31 +70,31 @@ class PathWeights:
     penetration: float = 2.0
     placement: float = 0.05
     morph: float = 0.3
+    contact: float = 0.5  # mesh vertices inside other flesh (the exact test's contacts), per cm^2
 
 
-def step_sizes_deg(path: list[HandPoses]) -> torch.Tensor:
+def step_sizes_deg(path: PoseBatch) -> torch.Tensor:
     """(frames - 1,) the largest change between consecutive frames of any joint angle, wrist
     angle or global rotation (geodesic), degrees."""
     steps = []
-    for h in path:
+    for h in path.hands:
         steps.append(torch.rad2deg((h.pose_rad[1:] - h.pose_rad[:-1]).abs().flatten(1).amax(1)))
         steps.append(torch.rad2deg((h.wrist_rad[1:] - h.wrist_rad[:-1]).abs().amax(1)))
         steps.append(rotation_angle_deg(h.rotation[:-1], h.rotation[1:]))
     return torch.stack(steps, 1).amax(1)
 
 
-def path_smoothness(hands: list[tuple[torch.Tensor, ...]]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def path_smoothness(hands: list[HandPoseBatch]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Smoothness terms of a path, each a scalar: the sum of squared first differences (joint,
-    wrist and rotation-vector steps in radians, wrist travel in units of 2 cm), of squared
-    second differences (the same but rotations), and the squared overshoot of every step
-    beyond STEP_LIMIT_DEG. hands: per hand (pose (F, 15, 3), rotation (F, 3, 3),
-    translation (F, 3), wrist (F, 2)) along the F frames."""
+    wrist and rotation-vector steps in radians, wrist travel in units of TRAVEL_PER_RADIAN_M),
+    of squared second differences (the same but rotations), and the squared overshoot of every
+    step beyond STEP_LIMIT_DEG. hands: per hand slot its poses along the F frames."""
     smooth = accel = hinge = 0
-    for pose, rot, trans, wrist in hands:
+    for pose, rot, trans, wrist in (h.args() for h in hands):
         d_pose = pose[1:] - pose[:-1]
         d_wrist = wrist[1:] - wrist[:-1]
         d_rot = rotmat_to_rotvec(rot[:-1].transpose(-1, -2) @ rot[1:])
-        d_trans = (trans[1:] - trans[:-1]) / 0.02  # 2 cm weigh like a radian
+        d_trans = (trans[1:] - trans[:-1]) / TRAVEL_PER_RADIAN_M
         smooth = smooth + sum((d**2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_rot, d_trans))
         accel = accel + sum(((d[1:] - d[:-1]) ** 2).flatten(1).sum(1).sum() for d in (d_pose, d_wrist, d_trans))
         biggest = torch.cat([d_pose.abs().flatten(1), d_wrist.abs(), d_rot.norm(dim=1, keepdim=True)], 1)
@@ -94,67 +102,69 @@ def path_smoothness(hands: list[tuple[torch.Tensor, ...]]) -> tuple[torch.Tensor
     return smooth, accel, hinge
 
 
-def _morph_frames(morph: np.ndarray, height: int, searcher: Searcher) -> torch.Tensor:
-    """(F, height, W) float morph targets at the refinement's resolution."""
-    from skimage.transform import resize
-
-    width = round(morph.shape[2] * height / morph.shape[1])
-    small = np.stack([resize(m.astype(float), (height, width), order=1, anti_aliasing=True) for m in morph])
-    return torch.as_tensor(small, dtype=searcher.dtype, device=searcher.device)
-
-
 def refine_path(
-    searcher: Searcher,
-    path: list[HandPoses],
+    problem: Problem,
+    path: PoseBatch,
     morph: np.ndarray,
     steps: int = 200,
     weights: PathWeights = PathWeights(),
     height: int = 96,
-) -> list[HandPoses]:
+) -> PoseBatch:
     """Optimise the in-between frames of a path (the first and last stay fixed): smoothness
     over the whole path, and per frame penetration, placement and the morph target
-    ``morph`` (F, H, W) bool as a soft silhouette target. Ctrl-C raises :class:`Interrupted`
+    ``morph`` (F, H, W) bool as a soft silhouette target. Then, while the exact mesh test
+    finds frames whose hands pass through each other (hands.penetration), rounds of
+    CONTACT_STEPS more steps push those contacts out too. Ctrl-C raises :class:`Interrupted`
     with the path as refined so far."""
-    from handshadow.render.shadow import shadow_mask
-
-    frames = path[0].pose_rad.shape[0]
-    if frames <= 2:
+    if path.batch <= 2:
         return path
-    hyp = None
+    current = path
     try:
-        hyp = Hypotheses(path, searcher.limits).to(searcher.device)
-        free = torch.ones(frames, device=searcher.device)  # the end frames stay the fits
-        free[0] = free[-1] = 0
-        opt = torch.optim.Adam(hyp.param_groups(0.3))
-        targets = _morph_frames(morph, height, searcher)
-        scene, renderer, _ = searcher.level(height)
-        blur = 2.0 * height / searcher.target.shape[0]  # 2 full-resolution pixels
-        lo, hi = searcher.height_range
-        for _ in range(steps):
-            opt.zero_grad(set_to_none=True)
-            hands = [hyp.hand(i) for i in range(len(searcher.hands))]
-            outs = [model(*h) for model, h in zip(searcher.hands, hands)]
-            xy, h = renderer.project([o.vertices for o in outs])
-            mask = shadow_mask(xy, renderer.topology, scene.image.height, scene.image.width)
-            sil = ((gaussian_blur(mask, blur) - gaussian_blur(targets, blur)) ** 2).mean((1, 2))
-            centres = searcher.penetration.centres(
-                [(o.bone_rotations, o.bone_translations) for o in outs], [(rot, trans) for _, rot, trans, _ in hands]
-            )
-            pen = losses.penetration(searcher.penetration.depths(centres, searcher.light_position))
-            place = losses.placement(h, lo, hi)
-            smooth, accel, hinge = path_smoothness(hands)
-            per_frame = weights.penetration * pen + weights.placement * place + weights.morph * sil
-            loss = (
-                weights.smooth * smooth + weights.accel * accel + weights.step_hinge * hinge + (per_frame * free).sum()
-            )
-            loss.backward()
-            for p in hyp.parameters():
-                if p.grad is not None:
-                    p.grad *= free.view(-1, *([1] * (p.dim() - 1)))
-            opt.step()
-    except KeyboardInterrupt:  # the path as refined so far (still within the joint limits)
-        raise Interrupted(hyp.poses() if hyp is not None else path) from None
-    return hyp.poses()
+        level = problem.level(height)
+        targets = torch.as_tensor(
+            np.stack([resize_coverage(m, *level.maps.target.shape) for m in morph]),
+            dtype=problem.dtype,
+            device=problem.device,
+        )
+        current = _refine(problem, current, level, targets, steps, weights)
+        for _ in range(CONTACT_ROUNDS):
+            found = problem.mesh_penetration(current)[1:-1]  # the end frames are the fits, apart
+            deep = [f.contacts for f in found if f.deepest_mm > TOLERANCE_MM]
+            if not deep:
+                break
+            current = _refine(problem, current, level, targets, CONTACT_STEPS, weights, Contacts.cat(deep))
+    except KeyboardInterrupt:  # between the rounds: the path as refined so far
+        raise Interrupted(current) from None
+    return current
+
+
+def _refine(problem, path, level, targets, steps, weights, contacts: Contacts | None = None) -> PoseBatch:
+    """Steps of the path objective (plus the contacts' push, when given); Ctrl-C raises
+    Interrupted with the path reached."""
+    params = PoseParameters(path, problem.limits)
+    free = torch.ones(path.batch, dtype=problem.dtype, device=problem.device)  # the end frames stay the fits
+    free[0] = free[-1] = 0
+    blur = MORPH_BLUR_PX * level.scale
+
+    def evaluate():
+        hands = params.hands()
+        outs = problem.pose(hands)
+        shadow = level.renderer.render([o.vertices for o in outs])
+        sil = ((gaussian_blur(shadow.mask, blur) - gaussian_blur(targets, blur)) ** 2).mean((1, 2))
+        pen = losses.penetration(problem.proxy_depths(hands, outs))
+        place = losses.placement(shadow.heights, *problem.placement_range)
+        smooth, accel, hinge = path_smoothness(hands)
+        per_frame = weights.penetration * pen + weights.placement * place + weights.morph * sil
+        if contacts is not None:
+            per_frame = per_frame + weights.contact * contact_penalty([o.vertices for o in outs], contacts)
+        loss = weights.smooth * smooth + weights.accel * accel + weights.step_hinge * hinge + (per_frame * free).sum()
+        return loss, None
+
+    try:
+        optimise(params, evaluate, steps, problem.rates.scaled(PATH_LR_SCALE), grad_mask=free)
+    except KeyboardInterrupt:
+        raise Interrupted(params.poses()) from None
+    return params.poses()
 
 
 @dataclasses.dataclass
@@ -183,15 +193,14 @@ class PathReport:
 
 @torch.no_grad()
 def report(
-    searcher: Searcher, path: list[HandPoses], target_a: np.ndarray, target_b: np.ndarray, interrupted: bool = False
+    problem: Problem, path: PoseBatch, target_a: np.ndarray, target_b: np.ndarray, interrupted: bool = False
 ) -> tuple[PathReport, np.ndarray]:
     """Measures of a path, and its exact shadows (frames, H, W) bool at full resolution;
     interrupted: the path is as refined so far (Ctrl-C)."""
-    shadows = searcher.shadows(path).cpu().numpy() > 0.5
+    shadows = problem.shadows(path).cpu().numpy() > 0.5
     a, b = np.asarray(target_a, bool), np.asarray(target_b, bool)
     start, end = score(shadows[0], a), score(shadows[-1], b)
-    iou = lambda m, t: float((m & t).sum() / max((m | t).sum(), 1))  # noqa: E731
-    depth = searcher.penetration_mm(path).cpu().numpy()
+    depth = np.array([p.deepest_mm for p in problem.mesh_penetration(path)])
     steps = step_sizes_deg(path).cpu().numpy()
     rep = PathReport(
         start.iou,
@@ -201,9 +210,9 @@ def report(
         start.hd95,
         end.hd95,
         float(steps.max()) if len(steps) else 0.0,
-        int((depth > PENETRATION_MM).sum()),
-        [iou(m, a) for m in shadows],
-        [iou(m, b) for m in shadows],
+        int((depth > TOLERANCE_MM).sum()),
+        iou(shadows, a).tolist(),
+        iou(shadows, b).tolist(),
         steps.tolist(),
         depth.tolist(),
         interrupted,

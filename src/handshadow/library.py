@@ -6,7 +6,8 @@ from __future__ import annotations
 import json
 
 from handshadow.paths import PACKAGE_DATA
-from handshadow.posefile import PoseSet, parse_pose
+from handshadow.posefile import parse_pose
+from handshadow.poses import PosedScene
 
 LIBRARY = PACKAGE_DATA / "library"
 
@@ -15,7 +16,7 @@ def library_names() -> list[str]:
     return sorted(p.stem for p in LIBRARY.glob("*.json"))
 
 
-def load_library_pose(name: str) -> PoseSet:
+def load_library_pose(name: str) -> PosedScene:
     path = LIBRARY / f"{name}.json"
     return parse_pose(json.loads(path.read_text()), str(path))
 

@@ -61,6 +61,9 @@ class TargetMaps:
 
 
 NOTCH_RADII_SHARE = (0.012, 0.025, 0.04)
+# placement() is a mean over every vertex, most of them in range: this gain keeps its unit
+# (1 cm out on every vertex costs 10) in the range of the other terms' weights.
+PLACEMENT_GAIN = 10.0
 
 
 def notches(target: np.ndarray) -> np.ndarray:
@@ -133,7 +136,16 @@ def placement(heights_m: torch.Tensor, lo_m: float, hi_m: float, scale_m: float 
     wall, off both). heights (B, V) -> (B,) squared overshoot in units of scale_m."""
     below = torch.relu(lo_m - heights_m)
     above = torch.relu(heights_m - hi_m)
-    return (((below + above) / scale_m) ** 2).mean(1) * 10
+    return (((below + above) / scale_m) ** 2).mean(1) * PLACEMENT_GAIN
+
+
+def inside_frame(points_xy: torch.Tensor, height: int, width: int, margin_px: float = 0.0) -> torch.Tensor:
+    """Points that must stay out of the picture (an elbow: the upper arm beyond it would cast
+    a shadow we do not model): the squared distance (frame heights) each still has to go to
+    leave the frame grown by margin_px, summed over points. points_xy (B, P, 2) pixels -> (B,)."""
+    x, y = points_xy[..., 0], points_xy[..., 1]
+    to_leave = torch.minimum(torch.minimum(x, width - x), torch.minimum(y, height - y)) + margin_px
+    return ((torch.relu(to_leave) / height) ** 2).sum(-1)
 
 
 def soft_range(value: torch.Tensor, lo: float, hi: float, scale: float) -> torch.Tensor:

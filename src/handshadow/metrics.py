@@ -1,12 +1,14 @@
-"""Judging a fit (shared/notes/metrics.md): IoU alone rewards blobs.
+"""Judging a fit (docs/metrics.md): IoU alone rewards blobs.
 
-All functions take binary (H, W) numpy masks (shadow, target) and work in pixels of that frame.
+All functions take binary (H, W) numpy masks (shadow, target) and work in pixels of that frame
+(``iou`` also takes batches and tensors).
     iou              intersection over union
     boundary_f1      outlines within 2 px of each other, precision and recall combined
     hd95             95th percentile of outline-to-outline distances, both ways, / frame height
     thin_recall      share of the target's thin parts covered by the shadow; thin parts are
                      what an opening with a disc of radius 4 % of the frame height removes
 A fit is a success when IoU >= 0.8, thin-part recall >= 0.6 and HD95 <= 0.03.
+:func:`rank_key` orders results by these measures (the search's ranking).
 """
 
 from __future__ import annotations
@@ -22,6 +24,10 @@ SUCCESS_THIN = 0.6
 SUCCESS_HD95 = 0.03
 THIN_RADIUS_SHARE = 0.04
 NEAR_MISS_HD95 = 0.01  # how far past the HD95 bar a result still counts as a near miss
+# The ranking's blend among results on the same side of the success test: IoU, plus this
+# much thin-part recall, minus this much HD95 (a share of the frame, so 0.01 weighs 0.04).
+RANK_THIN = 0.5
+RANK_HD95 = 4.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,9 +60,30 @@ class FitScore:
         return f"IoU {self.iou:.3f}, thin parts {self.thin_recall:.2f}, HD95 {self.hd95:.3f}"
 
 
-def iou(shadow: np.ndarray, target: np.ndarray) -> float:
-    union = np.logical_or(shadow, target).sum()
-    return float(np.logical_and(shadow, target).sum() / union) if union else 1.0
+def iou(shadow, target):
+    """Intersection over union over the last two axes (H, W); leading batch axes broadcast.
+
+    numpy arrays or torch tensors, binary masks or coverages in [0, 1] (for those the soft
+    IoU sum(a b) / (sum a + sum b - sum(a b)), which is the IoU on binary masks). Two empty
+    masks agree perfectly: 1. Returns a float for single masks, else an array or tensor of
+    the batch shape."""
+    if hasattr(shadow, "detach"):  # torch
+        a = shadow.float() if not shadow.is_floating_point() else shadow
+        b = target.to(a.dtype)
+        inter = (a * b).sum((-2, -1))
+        union = a.sum((-2, -1)) + b.sum((-2, -1)) - inter
+        return _ratio_or_one(inter, union)
+    a = np.asarray(shadow, np.float64)
+    b = np.asarray(target, np.float64)
+    inter = (a * b).sum((-2, -1))
+    union = a.sum((-2, -1)) + b.sum((-2, -1)) - inter
+    out = np.where(union > 0, inter / np.maximum(union, 1e-12), 1.0)
+    return float(out) if out.ndim == 0 else out
+
+
+def _ratio_or_one(inter, union):
+    """inter / union for tensors, 1 where the union is empty."""
+    return (inter / union.clamp(min=1e-12)).where(union > 0, union.new_ones(()))
 
 
 def outline(mask: np.ndarray) -> np.ndarray:
@@ -106,3 +133,16 @@ def score(shadow: np.ndarray, target: np.ndarray, thin: np.ndarray | None = None
     return FitScore(
         iou(shadow, target), boundary_f1(shadow, target), hd95(shadow, target), thin_recall(shadow, target, thin)
     )
+
+
+def rank_key(s: FitScore) -> tuple:
+    """Sort key, smaller is better: successes first, then a blend of the measures
+    (RANK_THIN, RANK_HD95)."""
+    return (not s.success, -(s.iou + RANK_THIN * s.thin_recall - RANK_HD95 * s.hd95))
+
+
+def rank(shadows: np.ndarray, target: np.ndarray, thin: np.ndarray | None = None) -> list[int]:
+    """Indices of shadows (B, H, W) bool, best first by :func:`rank_key` against the target."""
+    thin = thin_parts(target) if thin is None else thin
+    keys = [rank_key(score(m, target, thin)) for m in shadows]
+    return sorted(range(len(keys)), key=keys.__getitem__)

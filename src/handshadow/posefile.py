@@ -1,5 +1,7 @@
-"""pose.json: the hands of a result (per hand its side, model, shape, joint angles, global
-rotation and translation) plus the scene, as written by ``fit`` and read by ``render``.
+"""Reading and checking pose files (the types are in :mod:`handshadow.poses`).
+
+pose.json holds the hands of a result (per hand its side, model, shape, joint angles, global
+rotation and translation) plus the scene, as written by ``fit`` and read by ``render``:
 
     {"format": "handshadow.pose/1",
      "scene": {...scene.json contract without "meshes"...},
@@ -18,7 +20,6 @@ moves toward the thumb, on either hand.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -26,9 +27,9 @@ import numpy as np
 
 from handshadow.errors import HandshadowError
 from handshadow.hands.rig import JOINT_NAMES, check_side
+from handshadow.poses import FORMAT, HandPose, PosedScene
 from handshadow.scene import Scene, SceneError
 
-FORMAT = "handshadow.pose/1"
 PATH_FORMAT = "handshadow.poses/1"  # interpolate's poses.json: a scene and a list of frames
 
 
@@ -36,69 +37,7 @@ class PoseFileError(HandshadowError):
     """A pose file that cannot be read."""
 
 
-@dataclasses.dataclass(frozen=True)
-class HandPose:
-    """One posed hand. pose_deg (15, 3) twist/spread/bend degrees; rotation (3, 3); translation
-    (3,) m; wrist_deg (2,) flexion and deviation degrees."""
-
-    side: str
-    model: str
-    shape: dict
-    pose_deg: np.ndarray
-    rotation: np.ndarray
-    translation: np.ndarray
-    wrist_deg: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(2))
-
-    def tensors(self, dtype=None, device="cpu"):
-        """(1, 15, 3) radians, (1, 3, 3), (1, 3), (1, 2) radians: HandModel.forward's arguments
-        (float32 by default)."""
-        import torch
-
-        t = dict(dtype=dtype or torch.float32, device=device)
-        return (
-            torch.as_tensor(np.radians(self.pose_deg), **t)[None],
-            torch.as_tensor(self.rotation, **t)[None],
-            torch.as_tensor(self.translation, **t)[None],
-            torch.as_tensor(np.radians(self.wrist_deg), **t)[None],
-        )
-
-    def to_json(self) -> dict:
-        return {
-            "side": self.side,
-            "model": self.model,
-            "shape": self.shape,
-            "pose_deg": np.round(np.asarray(self.pose_deg, float), 4).tolist(),
-            "wrist_deg": np.round(np.asarray(self.wrist_deg, float), 4).tolist(),
-            "rotation": np.round(np.asarray(self.rotation, float), 9).tolist(),
-            "translation": np.round(np.asarray(self.translation, float), 9).tolist(),
-        }
-
-
-@dataclasses.dataclass(frozen=True)
-class PoseSet:
-    """The content of a pose file."""
-
-    hands: tuple[HandPose, ...]
-    scene: Scene
-    forearm: bool = True
-    fit: dict | None = None
-
-    def to_json(self) -> dict:
-        out = {
-            "format": FORMAT,
-            "scene": self.scene.to_json(),
-            "forearm": self.forearm,
-            "hands": [h.to_json() for h in self.hands],
-        }
-        if self.fit is not None:
-            out["fit"] = self.fit
-        return out
-
-    def save(self, path: Path) -> None:
-        Path(path).write_text(json.dumps(self.to_json(), indent=1) + "\n")
-
-
-def load_pose_file(path: str | Path, frame: int = 0) -> PoseSet:
+def load_pose_file(path: str | Path, frame: int = 0) -> PosedScene:
     """Read and check a pose file (pose.json, or one frame of a poses.json path); raises
     PoseFileError with a one-line reason."""
     path = Path(path)
@@ -120,7 +59,7 @@ def load_pose_file(path: str | Path, frame: int = 0) -> PoseSet:
     return parse_pose(data, str(path))
 
 
-def parse_pose(data, where: str = "pose") -> PoseSet:
+def parse_pose(data, where: str = "pose") -> PosedScene:
     if not isinstance(data, dict):
         raise PoseFileError(f"{where}: expected a JSON object")
     if data.get("format", FORMAT) != FORMAT:
@@ -142,7 +81,7 @@ def parse_pose(data, where: str = "pose") -> PoseSet:
     unknown = set(data) - {"format", "about", "scene", "forearm", "hands", "fit", "iou_a", "iou_b"}
     if unknown:
         raise PoseFileError(f"{where}: unknown field(s) {', '.join(sorted(unknown))}")
-    return PoseSet(hands=hands, scene=scene, forearm=forearm, fit=fit if isinstance(fit, dict) else None)
+    return PosedScene(hands=hands, scene=scene, forearm=forearm, fit=fit if isinstance(fit, dict) else None)
 
 
 def _parse_hand(h, where: str) -> HandPose:

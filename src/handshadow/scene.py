@@ -34,6 +34,11 @@ if TYPE_CHECKING:
 LightType = Literal["point", "directional"]
 LAMP_TO_WALL_M = 2.0
 FRAME_HEIGHT_M = {"point": 0.8, "directional": 0.4}  # a hand's shadow fills about half of it
+# Where hands belong, as distances in front of the wall (Scene.placement_range):
+WALL_CLEARANCE_M = 0.03  # the nearest a hand comes to the wall while the search runs
+LAMP_CLEARANCE_M = 0.25  # room kept before the lamp (a point light)
+FARTHEST_M = 3.0  # the farthest from the wall (a directional light has no lamp to stop at)
+RESULT_MARGIN_M = 0.005  # a result keeps at least this from the wall and the lamp's plane
 
 
 class SceneError(HandshadowError):
@@ -110,6 +115,13 @@ class Scene:
             n = np.asarray(self.wall.normal)
             return 0.0, float((np.asarray(self.light.position) - np.asarray(self.wall.point)) @ n)
         return 0.0, math.inf
+
+    def placement_range(self) -> tuple[float, float]:
+        """Distances from the wall (metres, along its normal) where the search keeps the hands:
+        off the wall by WALL_CLEARANCE_M, LAMP_CLEARANCE_M short of a point light, and at most
+        FARTHEST_M out. Inside :meth:`light_depth_range`, which is the physical bound."""
+        _, hi = self.light_depth_range()
+        return WALL_CLEARANCE_M, min(hi - LAMP_CLEARANCE_M, FARTHEST_M) if math.isfinite(hi) else FARTHEST_M
 
     def projection_matrix(self) -> np.ndarray:
         """(4, 4) matrix M mapping a world point p to (x', y', w', h) = M [p, 1], with the pixel

@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from handshadow.export.meshes import round_vertices, write_obj
-from handshadow.pipeline import PosedMesh, exact_shadow
+from handshadow.hands.posed import PosedMesh, mesh_shadow
+from handshadow.metrics import iou
 from handshadow.scene import Scene
 from tests.conftest import random_pose, random_rotation
 
@@ -41,10 +42,6 @@ def raytraced_shadow(scene: Scene, obj_paths) -> tuple[np.ndarray, np.ndarray]:
     return hits[0], hits.mean(0)
 
 
-def iou(a, b):
-    return (a & b).sum() / max((a | b).sum(), 1)
-
-
 @pytest.mark.parametrize("case", range(4))
 def test_shadow_equals_ray_traced_shadow(tmp_path, hands64, case):
     rng = np.random.default_rng(100 + case)
@@ -63,7 +60,7 @@ def test_shadow_equals_ray_traced_shadow(tmp_path, hands64, case):
     for m in meshes:
         paths.append(tmp_path / f"{m.side}.obj")
         write_obj(paths[-1], m.vertices, m.faces, m.side)
-    ours = exact_shadow(scene, meshes) > 0.5
+    ours = mesh_shadow(scene, meshes) > 0.5
     centre, share = raytraced_shadow(scene, paths)
     print(
         f"case {case}: IoU centre {iou(ours, centre):.4f}, 5-sample {iou(ours, share >= 0.5):.4f}, shadow px {ours.sum()}"

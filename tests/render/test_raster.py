@@ -55,3 +55,16 @@ def test_closed_mesh_culling_keeps_the_exact_shadow(hands64):
     culled = shadow_mask(verts, topo, 128, 128)
     everything = coverage(rasterize_spans(verts[:, hand.faces], 128, 128), 1, 128, 128)
     assert topo.closed and torch.equal(culled.bool(), everything)
+
+
+def test_a_triangle_whose_normal_points_at_the_lamp_faces_the_light():
+    from handshadow.render.shadow import front_facing
+    from handshadow.scene import Scene
+
+    scene = Scene.default(64, 64)  # lamp at z = 2, wall at z = 0
+    tri = torch.tensor([[[0.0, 0.0, 1.0], [0.1, 0.0, 1.0], [0.0, 0.1, 1.0]]], dtype=torch.float64)
+    normal = torch.linalg.cross(tri[0, 1] - tri[0, 0], tri[0, 2] - tri[0, 0])
+    assert float(normal[2]) > 0  # counter-clockwise about +z: it faces the lamp
+    xy, _ = scene.project(tri)
+    assert bool(front_facing(xy[:, None])[0, 0])
+    assert not bool(front_facing(xy[:, None, [0, 2, 1]])[0, 0])  # the same triangle turned away

@@ -107,6 +107,14 @@ def read_closed_mesh(path: Path, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
 
 
+def shadow_of(scene: Scene, meshes: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """(H, W) bool exact shadow of closed meshes, each vertices (V, 3) and faces (F, 3) in the
+    scene's units (the project's renderer, float64)."""
+    from handshadow.render import exact_shadow
+
+    return exact_shadow(scene, [v for v, _ in meshes], [f for _, f in meshes]) > 0.5
+
+
 def read_shadow(path: Path) -> np.ndarray | None:
     """shadow.png as (H, W) bool (dark = shadow), or None when there is none."""
     if not path.is_file():

@@ -53,6 +53,7 @@ from handshadow.export.printframe import (
     print_frame,
     read_closed_mesh,
     read_shadow,
+    shadow_of,
 )
 from handshadow.export.thinparts import ThinPartsError, name_places, printable_hands
 from handshadow.metrics import iou
@@ -103,15 +104,13 @@ class PrintModel:
 
 def build_print(result: ResultMeshes, settings: PrintSettings) -> PrintModel:
     """Unite, measure, thicken and stand the hands of a result (see the module docstring)."""
-    from handshadow.render import mesh_shadow
-
     frame = print_frame(result.scene, np.concatenate([v for _, v, _ in result.meshes]), settings)
     scene = frame.scene(result.scene)
     hands, thinnest, thickened = printable_hands(result, frame, scene, settings)
     rods, foot_length, stand, whole = (), 0.0, None, hands
     if settings.stand:
         rods, foot_length, stand = _stand(
-            scene, hands, mesh_shadow(scene, *solids.to_arrays(hands)), settings.stand_size
+            scene, hands, shadow_of(scene, [solids.to_arrays(hands)]), settings.stand_size
         )
         whole = m3.Manifold.batch_boolean([hands, stand], m3.OpType.Add)
     return PrintModel(
@@ -133,8 +132,6 @@ def _stand(
     """Rods, the foot's length and the stand (board, foot, rods) as one solid; raises
     PrintError when some part of it would cast a shadow in the frame (shadow: (H, W) bool,
     the hands')."""
-    from handshadow.render import mesh_shadow
-
     parts = solids.parts(hands)
     try:
         candidates = stands.choose_rods(scene, parts, shadow, size)
@@ -143,7 +140,7 @@ def _stand(
     rods = [
         r
         for r in candidates
-        if stands.hidden(mesh_shadow(scene, *solids.to_arrays(stands.rod_solid(r, size.board))), shadow)
+        if stands.hidden(shadow_of(scene, [solids.to_arrays(stands.rod_solid(r, size.board))]), shadow)
     ]
     missing = sorted(set(range(len(parts))) - {r.part for r in rods})
     if missing:
@@ -155,7 +152,7 @@ def _stand(
     foot_length = max(size.foot_min, 1.5 * (_centre_of_mass([hands, rods_and_board])[2] - size.board))
     _, foot = stands.board_and_foot(scene, size, foot_length)
     foot_front = foot.trim_by_plane((0.0, 0.0, 1.0), size.board)  # the part in front of the wall
-    if mesh_shadow(scene, *solids.to_arrays(foot_front)).any():
+    if shadow_of(scene, [solids.to_arrays(foot_front)]).any():
         raise PrintError("the foot would cast a shadow in the frame; print with --no-stand")
     return rods, float(foot_length), m3.Manifold.batch_boolean([rods_and_board, foot], m3.OpType.Add)
 
@@ -239,12 +236,11 @@ def save_print(
 ) -> PrintReport:
     """Check the print, write its files (paths: from :func:`output_paths`) and report."""
     from handshadow.export.printsheet import instructions
-    from handshadow.render import mesh_shadow
 
     meshes, sidecar = paths
     vertices, faces = check_printable(model, settings)
     wall_z = float(model.scene.wall.point[2])
-    cast = mesh_shadow(model.scene, *solids.to_arrays(model.solid.trim_by_plane((0.0, 0.0, 1.0), wall_z + 1e-6)))
+    cast = shadow_of(model.scene, [solids.to_arrays(model.solid.trim_by_plane((0.0, 0.0, 1.0), wall_z + 1e-6))])
     facts = sheet_facts(model, settings, vertices, name_places(result, model.frame, model.thickened))
     data = print_json(model, settings, result, meshes[0].name, len(faces))
     files = write_print(vertices, faces, data, _picture(model, cast, facts), meshes, sidecar)

@@ -49,14 +49,6 @@ def to_arrays(solid: m3.Manifold) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vert_properties)[:, :3].astype(np.float64), np.asarray(mesh.tri_verts).astype(np.int64)
 
 
-def side_by_side(meshes: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) and faces (F, 3) of several meshes (each vertices, faces) in one pair
-    of arrays, not united (to cast their shadow together)."""
-    arrays = [(np.asarray(v, np.float64), np.asarray(f, np.int64)) for v, f in meshes]
-    offsets = np.cumsum([0] + [len(v) for v, _ in arrays])
-    return np.concatenate([v for v, _ in arrays]), np.concatenate([f + o for (_, f), o in zip(arrays, offsets)])
-
-
 def vertex_fans(faces: np.ndarray, num_vertices: int) -> list[np.ndarray]:
     """Vertex sets of fans (a vertex and its ring) that together hold every face: greedily the
     vertex whose fan holds the most faces not yet held. Returns arrays of vertex indices."""

@@ -16,7 +16,7 @@ import numpy as np
 
 from handshadow.errors import HandshadowError
 from handshadow.export import solid as solids
-from handshadow.export.printframe import PrintError, PrintFrame, PrintSettings, ResultMeshes, print_frame
+from handshadow.export.printframe import PrintError, PrintFrame, PrintSettings, ResultMeshes, print_frame, shadow_of
 from handshadow.metrics import iou
 from handshadow.scene import Scene
 
@@ -35,12 +35,10 @@ def printable_hands(
     centres (K, 3). Raises ThinPartsError, naming the parts and the smallest height that
     works, when the thickened hands' shadow would match the fit's by less than
     SHADOW_IOU_MIN (IoU)."""
-    from handshadow.render import mesh_shadow
-
-    reference = mesh_shadow(result.scene, *solids.side_by_side([(v, f) for _, v, f in result.meshes]))
+    reference = shadow_of(result.scene, [(v, f) for _, v, f in result.meshes])
     hands = solids.clean_solid([(frame.apply(v), f) for _, v, f in result.meshes])
     thickness = solids.local_thickness(hands, max_depth=10 * settings.min_wall_mm + 20)
-    cast = mesh_shadow(scene, *solids.to_arrays(hands))  # in pixels the same at any height
+    cast = shadow_of(scene, [solids.to_arrays(hands)])  # in pixels the same at any height
     thick = thickening(thickness, scene, settings.min_wall_mm, cast, reference)
     if len(thick.balls) and thick.shadow_iou < SHADOW_IOU_MIN:
         where = ", ".join(name_places(result, frame, thick.centres)) or f"{len(thick.centres)} spots"
@@ -73,12 +71,10 @@ def thickening(
     """The balls that bring a solid's thin parts to ``min_wall`` (mm), and how well the
     thickened solid's shadow, ``cast`` (H, W) bool (the solid's) with the balls', would match
     ``reference`` (H, W) bool (the shadow of a union is the union of the shadows)."""
-    from handshadow.render import mesh_shadow
-
     centres = solids.thickening_balls(thickness, min_wall)
     balls = solids.balls(centres, min_wall / 2)
     if balls:
-        cast = cast | mesh_shadow(scene, *solids.side_by_side([solids.to_arrays(b) for b in balls]))
+        cast = cast | shadow_of(scene, [solids.to_arrays(b) for b in balls])
     return Thickening(float(thickness.part.min()), centres, balls, iou(cast, reference))
 
 
@@ -116,14 +112,14 @@ def name_places(result: ResultMeshes, frame: PrintFrame, points: np.ndarray) -> 
     """Names of the hand parts nearest to points (K, 3) in print millimetres ("left index",
     "right palm", "left forearm"), most points first; empty when the result's pose.json
     cannot be posed here (the names are a courtesy, not a requirement)."""
+    from handshadow.hands.posed import pose_meshes
     from handshadow.hands.rig import FINGERS
     from handshadow.posefile import load_pose_file
 
     if len(points) == 0:
         return []
     try:
-        pose_set = load_pose_file(result.folder / "pose.json")
-        keypoints = {h.side: frame.apply(_keypoints(h, pose_set.forearm)) for h in pose_set.hands}
+        keypoints = {m.side: frame.apply(m.keypoints) for m in pose_meshes(load_pose_file(result.folder / "pose.json"))}
     except (HandshadowError, OSError, ValueError):
         return []
     labels = []
@@ -138,17 +134,6 @@ def name_places(result: ResultMeshes, frame: PrintFrame, points: np.ndarray) -> 
         labels.append(best[1])
     names, counts = np.unique(labels, return_counts=True)
     return [str(n) for n in names[np.argsort(-counts, kind="stable")]]
-
-
-def _keypoints(hand, forearm: bool) -> np.ndarray:
-    """(21, 3) keypoints of a posed hand, scene metres."""
-    import torch
-
-    from handshadow.hands import load_hand
-
-    model = load_hand(hand.model, hand.side, hand.shape, forearm=forearm, dtype=torch.float64)
-    with torch.no_grad():
-        return model(*hand.tensors(dtype=torch.float64)).keypoints[0].numpy()
 
 
 def _to_polyline(p: np.ndarray, chain: np.ndarray) -> tuple[float, float]:

@@ -22,12 +22,17 @@ Two presets:
 
 from __future__ import annotations
 
+import dataclasses
 import json
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from handshadow.hands.rig import FINGERS, Side, check_side
 from handshadow.paths import PACKAGE_DATA
+
+if TYPE_CHECKING:
+    import torch
 
 PRESETS = ("anatomical", "paper")
 # Wrist (flexion, deviation) [low, high] degrees: extension 70 / flexion 80, ulnar deviation 30
@@ -85,3 +90,26 @@ def _paper_limits(side: Side) -> np.ndarray:
             out[3 * f + j, :, 0] = np.minimum(0.0, values)
             out[3 * f + j, :, 1] = np.maximum(0.0, values)
     return out
+
+
+@dataclasses.dataclass(frozen=True)
+class JointLimits:
+    """Joint limits of one hand as tensors, radians: joints (15, 3, 2) and wrist (2, 2), each
+    [low, high]."""
+
+    joints: torch.Tensor
+    wrist: torch.Tensor
+
+    @staticmethod
+    def preset(preset: str = "anatomical", side: str = "right", dtype=None, device="cpu") -> JointLimits:
+        """A preset's limits for one side (float32 unless dtype)."""
+        import torch
+
+        t = dict(dtype=dtype or torch.float32, device=device)
+        return JointLimits(
+            torch.as_tensor(np.radians(joint_limits_deg(preset, side)), **t),
+            torch.as_tensor(np.radians(wrist_limits_deg(preset)), **t),
+        )
+
+    def to(self, device) -> JointLimits:
+        return JointLimits(self.joints.to(device), self.wrist.to(device))

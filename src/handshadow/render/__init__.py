@@ -4,10 +4,14 @@
     mask = shadow_mask(xy, topology, H, W)          # (B, H, W) exact 0/1, edge-sampled gradient
     soft = gaussian_blur(mask, sigma_px)            # optional wide mode for coarse stages
 
-:class:`ShadowRenderer` composes the three for a fixed set of meshes (the hands of a fit).
+:class:`ShadowRenderer` composes the two steps for a fixed set of meshes (the hands of a fit);
+:func:`exact_shadow` casts the shadow of posed meshes (numpy, float64), as the files show it.
 """
 
 from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -16,30 +20,40 @@ from handshadow.render.shadow import MeshTopology, shadow_mask
 from handshadow.render.soft import gaussian_blur
 from handshadow.scene import Scene
 
-__all__ = ["MeshTopology", "ShadowRenderer", "gaussian_blur", "merge_meshes", "mesh_shadow", "shadow_mask"]
+__all__ = [
+    "MeshTopology",
+    "Shadow",
+    "ShadowRenderer",
+    "exact_shadow",
+    "gaussian_blur",
+    "merge_faces",
+    "shadow_mask",
+]
 
 
-def merge_meshes(vertices: list[torch.Tensor], faces: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
-    """Concatenate meshes: vertices [(B, V_i, 3)] -> (B, sum V_i, 3); faces [(F_i, 3)] -> (sum F_i, 3)."""
-    offsets = [0]
-    for v in vertices[:-1]:
-        offsets.append(offsets[-1] + v.shape[1])
-    return torch.cat(vertices, 1), torch.cat([f + o for f, o in zip(faces, offsets)])
+def merge_faces(faces: Sequence, num_vertices: Sequence[int]):
+    """Faces of meshes whose vertices are concatenated in this order: [(F_i, 3)] and their
+    vertex counts V_i -> (sum F_i, 3), each mesh's indices offset by the vertices before it.
+    numpy arrays in, numpy out; tensors in, a tensor out."""
+    offsets = np.cumsum([0, *num_vertices[:-1]])
+    shifted = [f + int(o) for f, o in zip(faces, offsets)]
+    return torch.cat(shifted) if isinstance(faces[0], torch.Tensor) else np.concatenate(shifted)
 
 
-def mesh_shadow(scene: Scene, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(H, W) bool exact shadow of one closed mesh: vertices (V, 3) and faces (F, 3) as numpy
-    arrays in the scene's units, projected in float64. No gradient."""
-    points = torch.as_tensor(np.asarray(vertices, dtype=np.float64))[None]
-    topology = MeshTopology.from_faces(torch.as_tensor(np.asarray(faces, dtype=np.int64)))
-    with torch.no_grad():
-        xy, _ = scene.project(points)
-        mask = shadow_mask(xy, topology, scene.image.height, scene.image.width)
-    return mask[0].numpy() > 0.5
+@dataclasses.dataclass(frozen=True)
+class Shadow:
+    """What the renderer gives: mask (B, H, W) exact 0/1 in the vertices' dtype (gradients at
+    the outline), points_xy (B, V, 2) projected vertices in pixels, heights (B, V) distances
+    of the vertices in front of the wall, metres."""
+
+    mask: torch.Tensor
+    points_xy: torch.Tensor
+    heights: torch.Tensor
 
 
 class ShadowRenderer:
-    """The shadow of a fixed set of meshes in a scene.
+    """The shadow of a fixed set of meshes in a scene: a projection from the light composed
+    with the exact rasteriser.
 
     Args:
         scene: light, wall and image frame (its width and height set the resolution).
@@ -49,19 +63,28 @@ class ShadowRenderer:
 
     def __init__(self, scene: Scene, faces: list[torch.Tensor], num_vertices: list[int]):
         self.scene = scene
-        offsets = [sum(num_vertices[:i]) for i in range(len(faces))]
-        self.topology = MeshTopology.from_faces(torch.cat([f + o for f, o in zip(faces, offsets)]))
+        self.topology = MeshTopology.from_faces(merge_faces(faces, num_vertices))
 
     def to(self, device: torch.device | str) -> ShadowRenderer:
         self.topology = self.topology.to(device)
         return self
 
-    def project(self, vertices: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
-        """[(B, V_i, 3)] world vertices -> (B, V, 2) pixel coordinates and (B, V) heights above the wall."""
-        return self.scene.project(torch.cat(vertices, 1))
+    def render(self, vertices: list[torch.Tensor]) -> Shadow:
+        """[(B, V_i, 3)] world vertices -> :class:`Shadow`."""
+        xy, heights = self.scene.project(torch.cat(vertices, 1))
+        mask = shadow_mask(xy, self.topology, self.scene.image.height, self.scene.image.width)
+        return Shadow(mask, xy, heights)
 
     def __call__(self, vertices: list[torch.Tensor], sigma_px: float = 0.0) -> torch.Tensor:
         """(B, H, W) shadow of the meshes; exact when sigma_px is 0, else blurred by it."""
-        xy, _ = self.project(vertices)
-        mask = shadow_mask(xy, self.topology, self.scene.image.height, self.scene.image.width)
-        return gaussian_blur(mask, sigma_px)
+        return gaussian_blur(self.render(vertices).mask, sigma_px)
+
+
+def exact_shadow(scene: Scene, vertices: Sequence[np.ndarray], faces: Sequence[np.ndarray]) -> np.ndarray:
+    """(H, W) float mask of the exact shadow of meshes given as numpy vertices (V_i, 3) and
+    faces (F_i, 3), projected in float64. The caller checks that they lie between the light
+    and the wall."""
+    verts = torch.as_tensor(np.concatenate(vertices), dtype=torch.float64)[None]
+    topology = MeshTopology.from_faces(torch.as_tensor(merge_faces(list(faces), [len(v) for v in vertices])))
+    xy, _ = scene.project(verts)
+    return shadow_mask(xy, topology, scene.image.height, scene.image.width)[0].numpy()

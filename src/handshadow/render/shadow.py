@@ -110,11 +110,17 @@ def _gather_triangles(points: torch.Tensor, faces: torch.Tensor) -> torch.Tensor
 
 
 def front_facing(tri_xy: torch.Tensor) -> torch.Tensor:
-    """(B, F) bool: triangles (B, F, 3, 2) whose projected corners run counter-clockwise in
-    pixel coordinates (rows down), i.e. that face the light for outward-oriented meshes."""
+    """(B, F) bool: triangles (B, F, 3, 2) that face the light, i.e. whose outward normal
+    (corners counter-clockwise about it) points toward the lamp.
+
+    The wall image reads as seen from the lamp's side (columns along u, rows along v, and
+    u x v against the wall's normal, as in every scene this project writes), so such a
+    triangle's projected corners run counter-clockwise on screen: a negative cross product in
+    (column, row) coordinates. In a mirrored frame it picks the back faces instead, which cast
+    the same shadow on a closed mesh."""
     e1 = tri_xy[:, :, 1] - tri_xy[:, :, 0]
     e2 = tri_xy[:, :, 2] - tri_xy[:, :, 0]
-    return (e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]) > 0
+    return (e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]) < 0
 
 
 def contour_edges(facing: torch.Tensor, topology: MeshTopology) -> tuple[torch.Tensor, torch.Tensor]:

@@ -12,6 +12,7 @@ import dataclasses
 import numpy as np
 import torch
 
+from handshadow.render import merge_faces
 from handshadow.render.raster import fragments, rasterize_spans
 
 
@@ -72,7 +73,7 @@ def render_view(
     h, w = cam.height, cam.width
     verts = np.concatenate([m.vertices for m in meshes])
     offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
-    faces = np.concatenate([m.faces + o for m, o in zip(meshes, offsets)])
+    faces = merge_faces([m.faces for m in meshes], [len(m.vertices) for m in meshes])
     mesh_of_face = np.concatenate([np.full(len(m.faces), i) for i, m in enumerate(meshes)])
     xy, depth = cam.project(verts)
     tri_xy = torch.as_tensor(xy[faces], dtype=torch.float64)[None]

@@ -11,51 +11,45 @@ Mirror images (swapping left and right hands) double the candidates.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
+from handshadow.hands.limits import JointLimits
 from handshadow.hands.rig import FINGERS
 from handshadow.library import library_names, load_library_pose
-from handshadow.search import HandPoses, Limits
+from handshadow.metrics import iou
+from handshadow.poses import HandPose, HandPoseBatch, Origin, PoseBatch
 
+log = logging.getLogger(__name__)
 MIRROR = torch.diag(torch.tensor([-1.0, 1.0, 1.0]))
+# Two library hands at one depth cannot pass in front of each other: the right one starts
+# this much nearer the lamp.
+PAIR_DEPTH_OFFSET_M = 0.02
+ALIGN_FRAME_PX = 64  # the alignment works on shadows this many pixels high
+ALIGN_ANGLES_DEG = np.arange(0, 360, 20)
+ALIGN_SCALES = np.array([0.8, 1.0, 1.25])  # times the area ratio (a point light; else 1)
+PER_LIBRARY_POSE = 2  # at most this many starts from any one library pose
+ALIGN_WALL_CLEARANCE_M = 0.15  # the alignment's scaling keeps hands this far from the wall
+ALIGN_LAMP_CLEARANCE_M = 0.35  # ... and this far from a point light
 
 
-@dataclasses.dataclass
-class Candidates:
-    """B candidate hypotheses: per hand slot (right first when two hands) their HandPoses, and
-    where each came from ('library:<name>', 'random', ...)."""
-
-    hands: list[HandPoses]
-    origin: list[str]
-
-    @property
-    def batch(self) -> int:
-        return self.hands[0].pose_rad.shape[0]
-
-    def select(self, idx) -> Candidates:
-        idx = list(idx)
-        return Candidates([h.select(torch.as_tensor(idx)) for h in self.hands], [self.origin[i] for i in idx])
-
-    @staticmethod
-    def cat(items: list[Candidates]) -> Candidates:
-        hands = [HandPoses.cat([c.hands[k] for c in items]) for k in range(len(items[0].hands))]
-        return Candidates(hands, [o for c in items for o in c.origin])
-
-
-def library_candidates(n_hands: int, sides: list[str], dtype=torch.float32) -> Candidates:
+def library_starts(n_hands: int, sides: list[str], dtype=torch.float32, exclude: tuple[str, ...] = ()) -> PoseBatch:
     """Library poses with the requested number of hands, in the order of ``sides``; a one-hand
-    pose of the other side is mirrored to fit, and every pose also comes mirrored."""
-    out_hands: list[list[HandPoses]] = [[] for _ in sides]
-    origin = []
+    pose of the other side is mirrored to fit, and every pose also comes mirrored. Poses
+    named in ``exclude`` are left out."""
+    out_hands: list[list[HandPoseBatch]] = [[] for _ in sides]
+    origins = []
     for name in library_names():
-        pose_set = load_library_pose(name)
-        if len(pose_set.hands) != n_hands:
+        if name in exclude:
             continue
-        by_side = {h.side: h for h in pose_set.hands}
+        posed = load_library_pose(name)
+        if len(posed.hands) != n_hands:
+            continue
+        by_side = {h.side: h for h in posed.hands}
         for mirrored in (False, True):
             picked = []
             for side in sides:
@@ -68,35 +62,34 @@ def library_candidates(n_hands: int, sides: list[str], dtype=torch.float32) -> C
                     mirror_this = mirrored
                 picked.append(_hand_poses(h, mirror_this, dtype))
             if len(picked) == 2:  # hands at one depth cannot pass in front of each other: part them
-                picked[0].translation[:, 2] += 0.02
+                picked[0].translation[:, 2] += PAIR_DEPTH_OFFSET_M
             for k, hp in enumerate(picked):
                 out_hands[k].append(hp)
-            origin.append(f"library:{name}" + (":mirrored" if mirrored else ""))
-    return Candidates([HandPoses.cat(h) for h in out_hands], origin)
+            origins.append(Origin("library", name, mirrored))
+    return PoseBatch([HandPoseBatch.cat(h) for h in out_hands], origins)
 
 
-def _hand_poses(h, mirrored: bool, dtype) -> HandPoses:
-    rot = torch.as_tensor(h.rotation, dtype=dtype)
-    trans = torch.as_tensor(h.translation, dtype=dtype)
+def _hand_poses(h: HandPose, mirrored: bool, dtype) -> HandPoseBatch:
+    batch = HandPoseBatch.from_hand_poses([h], dtype=dtype)
     if mirrored:
         m = MIRROR.to(dtype)
-        rot, trans = m @ rot @ m, m @ trans
-    return HandPoses(
-        torch.as_tensor(np.radians(h.pose_deg), dtype=dtype)[None],
-        rot[None],
-        trans[None],
-        torch.as_tensor(np.radians(h.wrist_deg), dtype=dtype)[None],
-    )
+        batch = HandPoseBatch(batch.pose_rad, m @ batch.rotation @ m, batch.translation @ m.T, batch.wrist_rad)
+    return batch
 
 
-def random_candidates(
-    n: int, sides: list[str], limits: list[Limits], rng: np.random.Generator, depth_m: float = 1.0, dtype=torch.float32
-) -> Candidates:
+def random_starts(
+    n: int,
+    sides: list[str],
+    limits: list[JointLimits],
+    rng: np.random.Generator,
+    depth_m: float = 1.0,
+    dtype=torch.float32,
+) -> PoseBatch:
     """n random hypotheses: each finger extended, half bent or curled; hands facing the wall,
     the lamp or sideways, pointing any way in the wall plane; two hands side by side."""
     hands = []
     for side, lim in zip(sides, limits):
-        lo, hi = lim.joints[..., 0].numpy(), lim.joints[..., 1].numpy()
+        lo, hi = lim.joints[..., 0].cpu().numpy(), lim.joints[..., 1].cpu().numpy()
         pose = np.zeros((n, 15, 3))
         for f in range(len(FINGERS)):
             mode = rng.choice(3, size=n, p=[0.5, 0.25, 0.25])
@@ -104,7 +97,7 @@ def random_candidates(
             pose[:, 3 * f : 3 * f + 3, 2] = np.radians(bend * np.array([1.0, 1.1, 0.8]))
             pose[:, 3 * f, 1] = np.radians(rng.normal(0, 10, n))
         pose = np.clip(pose, lo, hi)
-        wlo, whi = lim.wrist[:, 0].numpy(), lim.wrist[:, 1].numpy()
+        wlo, whi = lim.wrist[:, 0].cpu().numpy(), lim.wrist[:, 1].cpu().numpy()
         wrist = np.clip(np.radians(rng.normal(0, 25, (n, 2))), wlo, whi)
         rots = []
         for _ in range(n):
@@ -121,8 +114,8 @@ def random_candidates(
         trans = np.stack([np.full(n, x), np.full(n, -0.08), np.full(n, depth_m)], 1) + rng.normal(
             0, [0.03, 0.03, 0.05], (n, 3)
         )
-        hands.append(HandPoses(*(torch.as_tensor(a, dtype=dtype) for a in (pose, np.stack(rots), trans, wrist))))
-    return Candidates(hands, ["random"] * n)
+        hands.append(HandPoseBatch(*(torch.as_tensor(a, dtype=dtype) for a in (pose, np.stack(rots), trans, wrist))))
+    return PoseBatch(hands, [Origin("random")] * n)
 
 
 def _frame(fingers, back) -> np.ndarray:
@@ -164,12 +157,11 @@ def similarity_align(
             # Centroid after rotation and scale, then shift onto the target's centroid.
             shift = c_t[None] - scale[:, None] * (c_s @ rot.T)
             warped = _warp(shadows, rot, scale, shift, pivot)
-            inter = (warped * target).sum((1, 2))
-            iou = inter / (warped.sum((1, 2)) + t_area - inter).clamp(min=1e-6)
-            better = iou > best[0]
+            overlap = iou(warped, target)
+            better = overlap > best[0]
             best = (
-                torch.where(better, iou, best[0]),
-                torch.where(better, torch.full_like(iou, a), best[1]),
+                torch.where(better, overlap, best[0]),
+                torch.where(better, torch.full_like(overlap, a), best[1]),
                 torch.where(better, scale, best[2]),
                 torch.where(better[:, None], shift, best[3]),
             )
@@ -195,23 +187,26 @@ def _warp(images, rot, scale, shift, pivot):
 
 
 def apply_similarity(
-    cand: Candidates, angle: torch.Tensor, scale: torch.Tensor, shift_px: torch.Tensor, scene, frame_px: int
-) -> Candidates:
-    """Move the candidates' hands so that their shadows undergo the 2D similarity.
+    poses: PoseBatch, angle: torch.Tensor, scale: torch.Tensor, shift_px: torch.Tensor, scene, frame_px: int
+) -> PoseBatch:
+    """Move the hypotheses' hands so that their shadows undergo the 2D similarity
+    (angle (B,) radians, scale (B,), shift_px (B, 2), as :func:`similarity_align` gives).
 
     shift_px is in pixels of a frame frame_px pixels high. Rotation: about the wall normal
     through the lamp (the frame centre's normal for a directional light). Scale: for a point
     light, a move along the lamp's axis to magnification times scale (directional lights keep
-    the size). Shift: a move parallel to the wall by shift / magnification.
+    the size), kept between ALIGN_WALL_CLEARANCE_M and ALIGN_LAMP_CLEARANCE_M. Shift: a move
+    parallel to the wall by shift / magnification.
     """
     n = torch.as_tensor(scene.wall.normal, dtype=angle.dtype)
     metres_per_px = float(np.linalg.norm(scene.image.v)) / frame_px
     u = torch.as_tensor(np.asarray(scene.image.u) / np.linalg.norm(scene.image.u), dtype=angle.dtype)
     v = torch.as_tensor(np.asarray(scene.image.v) / np.linalg.norm(scene.image.v), dtype=angle.dtype)
-    # A rotation by +angle in image coordinates (x right, y down) turns about the wall normal by
-    # -angle when the image's v points down the wall (the usual frame).
+    # A rotation by +angle in image coordinates (x right, y down) is clockwise on the wall as
+    # seen from the lamp when u x v points into the wall (the usual frame): a turn by -angle
+    # about the wall normal. A mirrored frame turns the other way.
     handed = torch.sign(torch.cross(u, v, dim=0) @ n)
-    rot = _axis_rotation(n, -angle * handed)  # (B, 3, 3)
+    rot = _axis_rotation(n, angle * handed)  # (B, 3, 3)
     point = scene.light.type == "point"
     lamp_h = (
         float((np.asarray(scene.light.position) - np.asarray(scene.wall.point)) @ np.asarray(scene.wall.normal))
@@ -221,23 +216,24 @@ def apply_similarity(
     axis_point = torch.as_tensor(pivot_point(scene), dtype=angle.dtype)
     hands = []
     mean_h = torch.stack(
-        [((h.translation - torch.as_tensor(scene.wall.point, dtype=angle.dtype)) @ n) for h in cand.hands]
+        [((h.translation - torch.as_tensor(scene.wall.point, dtype=angle.dtype)) @ n) for h in poses.hands]
     ).mean(0)
     if point:
         mag = lamp_h / (lamp_h - mean_h)
         new_h = lamp_h - lamp_h / (mag * scale)
-        new_h = new_h.clamp(0.15, lamp_h - 0.35)
+        new_h = new_h.clamp(ALIGN_WALL_CLEARANCE_M, lamp_h - ALIGN_LAMP_CLEARANCE_M)
         dz = new_h - mean_h
         new_mag = lamp_h / (lamp_h - new_h)
     else:
         dz = torch.zeros_like(scale)
         new_mag = torch.ones_like(scale)
     shift_m = (shift_px[:, :1] * u + shift_px[:, 1:] * v) * metres_per_px / new_mag[:, None]
-    for h in cand.hands:
+    for h in poses.hands:
         rel = h.translation - axis_point
         t = (rot @ rel[..., None])[..., 0] + axis_point + dz[:, None] * n + shift_m
-        hands.append(HandPoses(h.pose_rad, rot @ h.rotation, t, h.wrist_rad))
-    return Candidates(hands, cand.origin)
+        hands.append(HandPoseBatch(h.pose_rad, rot @ h.rotation, t, h.wrist_rad))
+    origins = [dataclasses.replace(o, aligned=True) for o in poses.origins] if poses.origins is not None else None
+    return PoseBatch(hands, origins)
 
 
 def pivot_point(scene) -> np.ndarray:
@@ -263,3 +259,57 @@ def _axis_rotation(axis: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
     from handshadow.hands.kinematics import rotvec_to_rotmat
 
     return rotvec_to_rotmat(axis[None] * angle[:, None])
+
+
+def choose_starts(
+    problem,
+    sides: list[str],
+    n_random: int,
+    n_keep: int,
+    rng: np.random.Generator,
+    given: PoseBatch | None = None,
+    exclude: tuple[str, ...] = (),
+) -> PoseBatch:
+    """The search's starts: library poses (but those named in ``exclude``) and ``n_random``
+    random hands, each aligned to the target in 2D, the best ``n_keep`` by IoU (at most
+    PER_LIBRARY_POSE from any one library pose, so the starts stay diverse). ``given`` starts
+    (one PoseBatch, e.g. a morph's other end) are always kept, both as given and aligned.
+    problem: a search.problem.Problem; returns a PoseBatch on its device, with origins."""
+    parts = [
+        library_starts(len(sides), sides, exclude=exclude),
+        random_starts(n_random, sides, problem.limits, rng),
+    ]
+    if given is not None:
+        parts.append(given.detach().to("cpu").with_origins([Origin("given")] * given.batch))
+    cand = PoseBatch.cat(parts).to(problem.device)
+    scene = problem.scene
+    point = scene.light.type == "point"
+    target = problem.level(ALIGN_FRAME_PX).maps.target.cpu()
+    angle, scale, shift, _ = similarity_align(
+        problem.shadows(cand, ALIGN_FRAME_PX).cpu(),
+        target,
+        pivot_pixel(scene, ALIGN_FRAME_PX),
+        ALIGN_ANGLES_DEG,
+        ALIGN_SCALES if point else np.array([1.0]),
+    )
+    if not point:
+        scale = torch.ones_like(scale)
+    moved = apply_similarity(cand.to("cpu"), angle, scale, shift, scene, ALIGN_FRAME_PX).to(problem.device)
+    overlap = iou(problem.shadows(moved, ALIGN_FRAME_PX).cpu(), target)
+    order = torch.argsort(overlap, descending=True).tolist()
+    picked = list(range(cand.batch - given.batch, cand.batch)) if given is not None else []  # aligned
+    per_pose: dict[str, int] = {}
+    for i in order:
+        if len(picked) >= n_keep:
+            break
+        if i in picked:
+            continue
+        o = moved.origins[i]
+        if o.kind == "library":
+            if per_pose.get(o.name, 0) >= PER_LIBRARY_POSE:
+                continue
+            per_pose[o.name] = per_pose.get(o.name, 0) + 1
+        picked.append(i)
+    log.info("starts: %s", ", ".join(f"{moved.origins[i]} {float(overlap[i]):.2f}" for i in picked[:8]))
+    chosen = moved.select(picked)
+    return PoseBatch.cat([cand.select(slice(cand.batch - given.batch, None)), chosen]) if given is not None else chosen

@@ -1,0 +1,287 @@
+"""Do the hands pass through each other? An exact test on the meshes, and a penalty from it.
+
+A person's skin gives a little, so a vertex may sit up to TOLERANCE_MM inside other flesh; any
+deeper and the pose cannot be held. Two tests, both on the closed meshes that are written as
+``left.obj`` / ``right.obj`` (forearms included):
+
+* **between the hands**: a vertex of one hand is inside the other hand's closed surface when
+  its generalised winding number (Jacobson et al. 2013) with respect to that surface is over
+  one half; its depth is its exact distance to that surface (to the nearest point of any
+  triangle, not to the nearest vertex).
+* **within a hand**: the hand is cut into closed parts (each finger, capped at its base, and
+  the palm with the forearm, capped at the five finger bases). A finger's vertices are tested
+  against every other finger, and its middle and end segments against the palm; neighbouring
+  segments of one finger, and a finger's base against the palm it grows from, bend into each
+  other at every joint crease and are not tested.
+
+Winding numbers and distances come from libigl (exact, hierarchical). :func:`contact_penalty`
+turns the contacts found into a differentiable cost, so an optimiser can push the hands apart
+along the other surface's normal.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import igl
+import numpy as np
+import torch
+
+TOLERANCE_MM = 3.0  # what skin gives: deeper than this, the pose cannot be held
+FINGER_BASE = 0  # segment index of a finger's base (MCP; the thumb's CMC)
+
+
+@dataclasses.dataclass(frozen=True)
+class Part:
+    """A closed piece of one hand's mesh: faces (F, 3) into the hand's vertices, and the
+    boundary loops (each an (L,) vertex index array, in order) that a fan from the loop's
+    centre closes; vertices (N,) it owns."""
+
+    name: str
+    faces: np.ndarray
+    loops: tuple[np.ndarray, ...]
+    vertices: np.ndarray
+
+    def closed(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(vertices, faces) of the part closed by its caps, given the hand's posed vertices
+        (V, 3); the caps' centres are appended after the hand's vertices."""
+        centres = [positions[loop].mean(0) for loop in self.loops]
+        n = len(positions)
+        caps = [np.stack([loop, np.roll(loop, -1), np.full(len(loop), n + k)], 1) for k, loop in enumerate(self.loops)]
+        return np.concatenate([positions, np.asarray(centres).reshape(-1, 3)]), np.concatenate([self.faces, *caps])
+
+
+@dataclasses.dataclass(frozen=True)
+class HandParts:
+    """One hand mesh cut into closed parts: fingers[f] (thumb..little) and the palm (with the
+    wrist and forearm); segment (V,) each vertex's finger segment 0..2, -1 on the palm."""
+
+    fingers: tuple[Part, ...]
+    palm: Part
+    segment: np.ndarray
+
+
+def split_hand(faces: np.ndarray, skin_weights: np.ndarray, joint_bones: np.ndarray) -> HandParts:
+    """Cut a closed hand mesh into parts by each vertex's strongest bone: a triangle belongs to
+    a finger when all three corners do, else to the palm. faces (F, 3), skin_weights (V, K),
+    joint_bones (15,) the bone of each finger joint (thumb..little, base to tip)."""
+    faces = np.asarray(faces, np.int64)
+    owner = np.asarray(skin_weights).argmax(1)
+    finger_of_bone = np.full(skin_weights.shape[1], -1)
+    segment_of_bone = np.full(skin_weights.shape[1], -1)
+    for j, b in enumerate(np.asarray(joint_bones)):
+        finger_of_bone[b], segment_of_bone[b] = j // 3, j % 3
+    finger = finger_of_bone[owner]
+    corner = finger[faces]
+    in_finger = (corner == corner[:, :1]).all(1) & (corner[:, 0] >= 0)
+    fingers = []
+    for f in range(5):
+        sub = faces[in_finger & (corner[:, 0] == f)]
+        fingers.append(Part(f"finger{f}", sub, tuple(_boundary_loops(sub)), np.unique(sub)))
+    palm_faces = faces[~in_finger]
+    palm = Part("palm", palm_faces, tuple(_boundary_loops(palm_faces)), np.unique(palm_faces))
+    return HandParts(tuple(fingers), palm, segment_of_bone[owner])
+
+
+def _boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """The open boundary of a triangle set as ordered vertex loops (each edge used once)."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    key = {tuple(e) for e in directed}
+    boundary = [tuple(e) for e in directed if (e[1], e[0]) not in key]
+    # A boundary edge (a, b) runs along the set's orientation; the cap must run the other way.
+    nxt = {b: a for a, b in boundary}
+    loops, seen = [], set()
+    for start in nxt:
+        if start in seen:
+            continue
+        loop, v = [], start
+        while v not in seen:
+            seen.add(v)
+            loop.append(v)
+            v = nxt[v]
+        loops.append(np.asarray(loop, np.int64))
+    return loops
+
+
+@dataclasses.dataclass(frozen=True)
+class Contacts:
+    """Vertices found inside other flesh, N of them. For each: the hand it belongs to (mesh),
+    its index there (vertex), the hand whose surface it is inside (other; the same hand for a
+    finger inside another part), the nearest point of that surface as barycentric weights
+    (bary (N, 3)) on three of the other hand's vertices (corners (N, 3)), the surface's
+    outward normal there when found (normal (N, 3)) and the depth, metres; item: which pose of
+    a batch. The nearest point is on the skin: a part's caps decide what is inside only."""
+
+    item: np.ndarray
+    mesh: np.ndarray
+    vertex: np.ndarray
+    other: np.ndarray
+    corners: np.ndarray
+    bary: np.ndarray
+    normal: np.ndarray
+    depth_m: np.ndarray
+
+    @staticmethod
+    def empty() -> Contacts:
+        z = np.zeros(0, np.int64)
+        return Contacts(z, z, z, z, np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+
+    def for_item(self, item: int) -> Contacts:
+        """The same contacts as those of pose ``item`` of a batch."""
+        return dataclasses.replace(self, item=np.full(len(self.item), item))
+
+    @staticmethod
+    def cat(items: list[Contacts]) -> Contacts:
+        if not items:
+            return Contacts.empty()
+        return Contacts(*(np.concatenate([getattr(c, f.name) for c in items]) for f in dataclasses.fields(Contacts)))
+
+
+@dataclasses.dataclass(frozen=True)
+class Penetration:
+    """The exact test's answer for one pose: the deepest vertex between the hands and within
+    each hand, millimetres (0 when none is inside), and every contact deeper than
+    ``report_mm``."""
+
+    between_mm: float
+    within_mm: tuple[float, ...]
+    contacts: Contacts
+
+    @property
+    def deepest_mm(self) -> float:
+        return max([self.between_mm, *self.within_mm])
+
+    def performable(self, tolerance_mm: float = TOLERANCE_MM) -> bool:
+        return self.deepest_mm <= tolerance_mm
+
+
+def penetration(
+    positions: list[np.ndarray], faces: list[np.ndarray], parts: list[HandParts] | None = None, report_mm: float = 0.0
+) -> Penetration:
+    """The exact test for one pose of one or two hands.
+
+    Args:
+        positions: per hand its posed vertices (V_i, 3), metres.
+        faces: per hand its closed mesh's faces (F_i, 3).
+        parts: per hand its split (:func:`split_hand`), for the test within each hand; None
+            skips that test.
+        report_mm: contacts at least this deep are listed (all inside vertices by default).
+    """
+    found, between = [], 0.0
+    if len(positions) == 2:
+        for a, b in ((0, 1), (1, 0)):
+            c = _inside(positions[a], np.arange(len(positions[a])), positions[b], faces[b], a, b, report_mm)
+            between = max(between, float(c.depth_m.max(initial=0.0)) * 1000)
+            found.append(c)
+    within = []
+    for h, split in enumerate(parts or []):
+        deepest = 0.0
+        for target, queries in _part_pairs(split):
+            verts, tri = target.closed(positions[h])
+            c = _inside(positions[h], queries, verts, tri, h, h, report_mm, n_surface=len(target.faces))
+            deepest = max(deepest, float(c.depth_m.max(initial=0.0)) * 1000)
+            found.append(c)
+        within.append(deepest)
+    return Penetration(between, tuple(within), Contacts.cat(found))
+
+
+def _part_pairs(split: HandParts):
+    """(closed part, query vertex indices) pairs of the test within a hand."""
+    for f, part in enumerate(split.fingers):
+        for g, other in enumerate(split.fingers):
+            if g != f:
+                yield other, part.vertices
+        beyond_base = part.vertices[split.segment[part.vertices] > FINGER_BASE]
+        yield split.palm, beyond_base
+
+
+def _inside(query_pos, query_idx, verts, tri, mesh, other, report_mm, n_surface=None) -> Contacts:
+    """Contacts of the query vertices (indices into query_pos) inside the closed (verts, tri);
+    the nearest point is sought on its first n_surface triangles (the skin, not a part's caps)."""
+    pts = query_pos[query_idx]
+    lo, hi = verts.min(0), verts.max(0)
+    near = np.all((pts >= lo) & (pts <= hi), 1)  # only points in the surface's box can be inside
+    if not near.any():
+        return Contacts.empty()
+    idx, pts = query_idx[near], pts[near]
+    inside = igl.winding_number(verts, tri, pts) > 0.5
+    if not inside.any():
+        return Contacts.empty()
+    idx, pts = idx[inside], pts[inside]
+    skin = tri if n_surface is None else tri[:n_surface]
+    sq, tid, closest = igl.point_mesh_squared_distance(pts, verts, skin)
+    depth = np.sqrt(sq)
+    keep = depth * 1000 >= report_mm
+    idx, tid, closest, depth = idx[keep], tid[keep], closest[keep], depth[keep]
+    corners = skin[tid]
+    a, b, c = verts[corners[:, 0]], verts[corners[:, 1]], verts[corners[:, 2]]
+    bary = _barycentric(closest, a, b, c)
+    normal = np.cross(b - a, c - a)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-30)
+    n = len(idx)
+    return Contacts(np.zeros(n, np.int64), np.full(n, mesh), idx, np.full(n, other), corners, bary, normal, depth)
+
+
+def _barycentric(p, a, b, c) -> np.ndarray:
+    """(N, 3) barycentric coordinates of points p (N, 3) on triangles (a, b, c)."""
+    v0, v1, v2 = b - a, c - a, p - a
+    d00, d01, d11 = (v0 * v0).sum(1), (v0 * v1).sum(1), (v1 * v1).sum(1)
+    d20, d21 = (v2 * v0).sum(1), (v2 * v1).sum(1)
+    den = np.where(np.abs(d00 * d11 - d01 * d01) > 1e-30, d00 * d11 - d01 * d01, 1.0)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    return np.stack([1 - v - w, v, w], 1)
+
+
+def contact_penalty(
+    vertices: list[torch.Tensor],
+    contacts: Contacts,
+    margin_m: float = 0.001,
+    light: torch.Tensor | None = None,
+    sideways: float = 1.0,
+) -> torch.Tensor:
+    """A differentiable cost of contacts: per pose of a batch, the sum of squared depths (in
+    centimetres, plus ``margin_m`` so that they end just apart) of each contact vertex behind
+    the nearest point of the other surface, along that surface's normal.
+
+    vertices: per hand its posed vertices (B, V_i, 3); contacts.item says which pose each
+    contact belongs to. With ``light`` (a point light's position (3,)) the push between the
+    two hands keeps only ``sideways`` of its gradient across the light's ray: moving a hand
+    along its rays keeps its shadow in place. -> (B,)."""
+    batch, dev = vertices[0].shape[0], vertices[0].device
+    total = vertices[0].new_zeros(batch)
+    for a in range(len(vertices)):
+        for b in range(len(vertices)):
+            sel = (contacts.mesh == a) & (contacts.other == b)
+            if not sel.any():
+                continue
+            item = torch.as_tensor(contacts.item[sel], device=dev)
+            p = vertices[a][item, torch.as_tensor(contacts.vertex[sel], device=dev)]  # (N, 3)
+            corners = torch.as_tensor(contacts.corners[sel], device=dev)
+            tri = vertices[b][item[:, None], corners]  # (N, 3 corners, 3)
+            bary = torch.as_tensor(contacts.bary[sel], dtype=p.dtype, device=dev)
+            with torch.no_grad():  # the surface's normal now (it turns with its hand)
+                normal = torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+                normal = normal / normal.norm(dim=-1, keepdim=True).clamp(min=1e-12)
+            e = (tri * bary[..., None]).sum(1) - p  # to the surface point: along the normal when inside
+            if light is not None and a != b and sideways < 1.0:
+                with torch.no_grad():
+                    ray = p - light
+                    ray = ray / ray.norm(dim=-1, keepdim=True).clamp(min=1e-12)
+                along = (e * ray).sum(-1, keepdim=True) * ray
+                side = e - along
+                e = along + sideways * side + (1 - sideways) * side.detach()
+            depth = (e * normal).sum(-1) + margin_m
+            total = total.index_add(0, item, (torch.relu(depth) / 0.01) ** 2)
+    return total
+
+
+def hand_parts(model) -> HandParts:
+    """The split of a HandModel's mesh (cached per model)."""
+    cached = getattr(model, "_parts", None)
+    if cached is None:
+        cached = split_hand(
+            model.faces.cpu().numpy(), model.skin_weights.cpu().numpy(), model.joint_bones.cpu().numpy()
+        )
+        model._parts = cached
+    return cached

@@ -1,0 +1,77 @@
+"""A pose file's hands as meshes, and the shadow they cast: the exact geometry of a result.
+
+    meshes, mask = cast_shadow(posed_scene)   # [PosedMesh] float64 metres, (H, W) float mask
+
+Vertices are rounded as the OBJ files store them, so the written shadow, the meshes and any
+independent recomputation from the files agree to the pixel.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import torch
+
+from handshadow.errors import HandshadowError
+from handshadow.export.meshes import round_vertices
+from handshadow.hands import load_hand
+from handshadow.poses import HandPoseBatch, PosedScene
+from handshadow.render import exact_shadow
+from handshadow.scene import Scene
+
+
+class PlacementError(HandshadowError):
+    """Geometry that does not lie between the light and the wall."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PosedMesh:
+    """One posed hand, world frame: vertices (V, 3) float64 metres (rounded as in the OBJ),
+    faces (F, 3), keypoints (21, 3)."""
+
+    side: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    keypoints: np.ndarray
+
+
+def pose_meshes(posed: PosedScene, mano_dir: str | None = None) -> list[PosedMesh]:
+    """Build and pose the hands of a pose file (float64)."""
+    out = []
+    for h in posed.hands:
+        model = load_hand(h.model, h.side, h.shape, mano_dir, forearm=posed.forearm, dtype=torch.float64)
+        with torch.no_grad():
+            res = model(*HandPoseBatch.from_hand_poses([h], dtype=torch.float64).args())
+        out.append(
+            PosedMesh(h.side, round_vertices(res.vertices[0].numpy()), res.faces.numpy(), res.keypoints[0].numpy())
+        )
+    return out
+
+
+def check_placement(scene: Scene, meshes: list[PosedMesh]) -> None:
+    """Raise PlacementError unless every vertex lies strictly between the light and the wall."""
+    lo, hi = scene.light_depth_range()
+    n = np.asarray(scene.wall.normal)
+    for m in meshes:
+        h = (m.vertices - np.asarray(scene.wall.point)) @ n
+        if h.min() <= lo:
+            raise PlacementError(
+                f"the {m.side} hand reaches through the wall ({h.min():.3f} m); move it toward the light"
+            )
+        if h.max() >= hi:
+            raise PlacementError(
+                f"the {m.side} hand reaches the light's plane ({h.max():.3f} m from the wall); move it toward the wall"
+            )
+
+
+def mesh_shadow(scene: Scene, meshes: list[PosedMesh]) -> np.ndarray:
+    """(H, W) float mask of the exact shadow of posed meshes, after checking their placement."""
+    check_placement(scene, meshes)
+    return exact_shadow(scene, [m.vertices for m in meshes], [m.faces for m in meshes])
+
+
+def cast_shadow(posed: PosedScene, mano_dir: str | None = None) -> tuple[list[PosedMesh], np.ndarray]:
+    """The meshes of a pose file and their exact shadow (H, W) float in its scene."""
+    meshes = pose_meshes(posed, mano_dir)
+    return meshes, mesh_shadow(posed.scene, meshes)

@@ -1,0 +1,130 @@
+"""The search's numbers, each with a name: stages, loss weights, learning rates, the finishing
+steps. Frozen dataclasses; change one with ``dataclasses.replace``."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from handshadow.hands.arms import ELBOW_SPAN_M
+from handshadow.hands.penetration import TOLERANCE_MM
+
+
+@dataclasses.dataclass(frozen=True)
+class Stage:
+    """One coarse-to-fine stage of the search.
+
+    height: frame height in pixels at this stage; blur_px: Gaussian blur of shadow and target,
+    in full-resolution pixels (0: the exact shadow); attract_px: reach of the pull toward
+    missing parts, full-resolution pixels (0: off); steps: Adam steps; keep: hypotheses that
+    survive the stage; lr_scale: factor on the learning rates; skeleton: weight factor of the
+    skeleton terms (long-range guides: joints inside the target, fingers to thin parts)."""
+
+    height: int
+    blur_px: float
+    attract_px: float
+    steps: int
+    keep: int
+    lr_scale: float = 1.0
+    skeleton: float = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Weights:
+    """Weights of the objective's terms (see search.objective)."""
+
+    l2: float = 1.0
+    thin: float = 4.0  # extra weight of the target's thin parts in the image term
+    depth: float = 20.0  # extra weight per frame height of depth inside the target (holes cost more)
+    depth_cap: float = 0.05  # frame heights: depth (and spill distance) beyond this weighs no more
+    spill: float = 0.0  # the same outside the target, per frame height of distance (the polish uses it)
+    notches: float = 0.0  # extra weight of the target's holes and narrow notches (the polish uses it)
+    excess: float = 2.0
+    attraction: float = 0.3
+    penetration: float = 0.02
+    placement: float = 0.05
+    reach: float = 0.05  # wrists and elbows within one person's reach (Reach)
+    arms: float = 0.5  # forearms lead back: elbow no nearer the wall than its wrist (per Reach.margin_m, squared)
+    elbows_out: float = (
+        0.0  # elbows' shadows out of the picture, per squared frame height (off: see docs/performing.md)
+    )
+    inside: float = 3.0  # joints and forearm axes project into the target
+    thin_pull: float = 3.0  # fingers reach the target's thin parts
+    anchor: float = 0.002  # closeness to anchor poses, when the search has some
+    gaps: float = 4.0  # light leaking between fingers where the target is solid (fine stages)
+
+
+@dataclasses.dataclass(frozen=True)
+class LearningRates:
+    """Adam's learning rates per parameter group, before a stage's lr_scale."""
+
+    angles: float = 0.08  # joint and wrist logits
+    rotation: float = 0.02  # rotation vector, radians
+    translation: float = 0.003  # metres
+
+    def scaled(self, factor: float) -> LearningRates:
+        return LearningRates(self.angles * factor, self.rotation * factor, self.translation * factor)
+
+
+@dataclasses.dataclass(frozen=True)
+class Reach:
+    """What the performers' arms allow (docs/performing.md): the two wrists at most
+    ``max_wrist_gap_m`` apart and the two elbows at most ``max_elbow_span_m`` (one person:
+    shoulder breadth and two upper arms), each with a soft margin of ``margin_m``; when the
+    elbows are kept out of the picture (Weights.elbows_out), by ``elbow_margin_share`` of the
+    frame height. Two performers have no span limits."""
+
+    performers: int = 1
+    max_wrist_gap_m: float = 0.45
+    max_elbow_span_m: float = ELBOW_SPAN_M
+    margin_m: float = 0.05
+    elbow_margin_share: float = 0.02
+
+    def for_performers(self, n: int) -> Reach:
+        inf = float("inf")
+        return dataclasses.replace(self, performers=n) if n == 1 else Reach(n, inf, inf, self.margin_m)
+
+
+@dataclasses.dataclass(frozen=True)
+class Finishing:
+    """The finishing steps after the search: separation and polish.
+
+    The separation runs until the exact mesh test passes (no vertex more than
+    ``tolerance_mm`` inside other flesh, hands.penetration): first one hand passes in front of
+    the other along the light's rays (the smallest of ``pass_in_front_mm`` that parts them),
+    fingers bent into their own hand open (their bends scaled by the first of ``relax_bends``
+    that frees them), then rounds of ``separation_steps`` small steps of the joint and wrist
+    angles pushing the contacts out, with the contacts found afresh each round, at most
+    ``separation_rounds`` rounds. Both the separation and the polish step at ``lr_scale``.
+    The polish runs ``copies`` copies of the result (all but the first jittered by
+    ``jitter`` sigmas: joint logits, rotation vector in radians, translation in metres) for
+    ``steps`` steps, scoring every ``check_every``, with the gaps weight times
+    ``polish_gaps``, the notches and spill weights set, and the penetration weight times
+    ``polish_penetration``."""
+
+    tolerance_mm: float = TOLERANCE_MM
+    pass_in_front_mm: tuple[float, ...] = (5, 10, 15, 20, 30, 40, 55, 70, 90)
+    relax_bends: tuple[float, ...] = (0.95, 0.9, 0.85, 0.8, 0.75, 0.7, 0.65, 0.6, 0.5, 0.4)
+    separation_rounds: int = 12
+    separation_steps: int = 10
+    lr_scale: float = 0.15
+    steps: int = 60
+    copies: int = 4
+    check_every: int = 4
+    polish_gaps: float = 10.0
+    polish_notches: float = 4.0
+    polish_spill: float = 20.0
+    polish_penetration: float = 100.0
+    jitter: tuple[float, float, float] = (0.15, 0.01, 0.002)
+
+    def polish_weights(self, w: Weights) -> Weights:
+        return dataclasses.replace(
+            w,
+            gaps=w.gaps * self.polish_gaps,
+            notches=self.polish_notches,
+            spill=self.polish_spill,
+            penetration=w.penetration * self.polish_penetration,
+        )
+
+    def stage(self, height: int, steps: int) -> Stage:
+        """Small exact-shadow steps at full resolution, without the skeleton guides."""
+        return Stage(height=height, blur_px=0, attract_px=0, steps=steps, keep=1, lr_scale=self.lr_scale, skeleton=0.0)

@@ -1,0 +1,172 @@
+"""The search's objective: named loss terms of hypotheses at one stage.
+
+    terms, shadow = objective(problem, hands, stage)   # LossTerms of (B,) tensors, Shadow
+    terms.total                                       # (B,) what the optimiser minimises
+
+The image term is the paper's L2 between the (blurred) shadow and target, weighted toward thin
+parts and toward depth inside the target; the others pull the outline and the skeleton toward
+what is missing, push back spills and light leaking between fingers, and keep the hands
+physical (proxies apart, between lamp and wall, within one person's reach). Each term's
+function is in :mod:`handshadow.losses`; the weights are :class:`~handshadow.search.config.Weights`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+
+from handshadow import losses
+from handshadow.hands.arms import BACK_SLACK_M
+from handshadow.hands.kinematics import rotmat_to_rotvec
+from handshadow.hands.rig import KEYPOINT_NAMES
+from handshadow.poses import HandPoseBatch
+from handshadow.render import Shadow, gaussian_blur
+from handshadow.search.config import Stage, Weights
+from handshadow.search.problem import Level, Problem
+
+# Finger segments between keypoints (rig.KEYPOINT_NAMES: wrist, then per finger 3 joints + tip).
+SEGMENT_STARTS = [1 + 4 * f + k for f in range(5) for k in range(3)]
+SEGMENT_ENDS = [2 + 4 * f + k for f in range(5) for k in range(3)]
+# The anchor term: this much wrist travel (metres) or turn (radians) from the anchor counts one.
+ANCHOR_TRAVEL_M = 0.05
+ANCHOR_TURN_RAD = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class LossTerms:
+    """The objective's terms per hypothesis, each (B,) and already weighted; a term that is
+    off at this stage is zero. ``total`` is their sum."""
+
+    image: torch.Tensor  # weighted L2 of the blurred shadow against the blurred target
+    excess: torch.Tensor  # shadow outside the target, by its distance
+    gaps: torch.Tensor  # light leaking between fingers where the target is solid
+    attraction: torch.Tensor  # the outline drawn to missing parts
+    inside: torch.Tensor  # joints and forearm axes outside the target
+    thin_pull: torch.Tensor  # thin parts far from every finger
+    anchor: torch.Tensor  # placement away from the anchor poses
+    penetration: torch.Tensor  # collision proxies overlapping
+    placement: torch.Tensor  # vertices off the working range between wall and lamp
+    reach: torch.Tensor  # wrists or elbows farther apart than the performers reach
+    arms: torch.Tensor  # forearms that do not lead back toward the performer (and elbows in the picture)
+
+    @property
+    def total(self) -> torch.Tensor:
+        out = self.image
+        for f in dataclasses.fields(self)[1:]:
+            out = out + getattr(self, f.name)
+        return out
+
+    def values(self, i: int) -> dict[str, float]:
+        """Hypothesis i's terms as floats, by name."""
+        return {f.name: float(getattr(self, f.name)[i].detach()) for f in dataclasses.fields(self)}
+
+
+def objective(
+    problem: Problem, hands: list[HandPoseBatch], stage: Stage, weights: Weights | None = None
+) -> tuple[LossTerms, Shadow]:
+    """The loss terms of B hypotheses (one HandPoseBatch per hand slot, differentiable) at a
+    stage, and their exact shadow at the stage's resolution."""
+    w = weights or problem.weights
+    level = problem.level(stage.height)
+    outs = problem.pose(hands)
+    shadow = level.renderer.render([o.vertices for o in outs])
+    mask, maps = shadow.mask, level.maps
+    zero = mask.new_zeros(mask.shape[0])
+    blur = stage.blur_px * level.scale
+    image = w.l2 * losses.weighted_l2(gaussian_blur(mask, blur), *_image_maps(level, blur, w))
+    gaps = zero
+    if w.gaps and stage.blur_px <= 1:
+        gaps = w.gaps * losses.gaps(mask, maps.target, max(1, round(2 * level.scale)))
+    attraction = zero
+    if w.attraction and stage.attract_px > 0:
+        attraction = w.attraction * losses.attraction(mask, maps.target, stage.attract_px * level.scale)
+    inside = thin_pull = zero
+    if stage.skeleton > 0:
+        inside, thin_pull = _skeleton_terms(level, outs)
+        inside, thin_pull = stage.skeleton * w.inside * inside, stage.skeleton * w.thin_pull * thin_pull
+    anchor = w.anchor * anchor_distance(hands, problem.anchor.hands) if problem.anchor is not None else zero
+    reach, arms = _arm_terms(problem, level, hands, outs, w)
+    terms = LossTerms(
+        image=image,
+        excess=w.excess * losses.excess(mask, maps.outside_dist),
+        gaps=gaps,
+        attraction=attraction,
+        inside=inside,
+        thin_pull=thin_pull,
+        anchor=anchor,
+        penetration=w.penetration * losses.penetration(problem.proxy_depths(hands, outs)),
+        placement=w.placement * losses.placement(shadow.heights, *problem.placement_range),
+        reach=reach,
+        arms=arms,
+    )
+    return terms, shadow
+
+
+def _arm_terms(problem: Problem, level: Level, hands, outs, w: Weights) -> tuple[torch.Tensor, torch.Tensor]:
+    """(reach, arms) weighted (B,) terms (hands.arms): wrists and elbows within the performers'
+    reach; forearms leading back toward the performer (no elbow nearer the wall than its
+    wrist), and, when Weights.elbows_out is set, every elbow's shadow out of the picture."""
+    r = problem.reach
+    zero = hands[0].translation.new_zeros(hands[0].batch)
+    with_forearm = [(h, o) for h, o in zip(hands, outs) if o.forearm_points.shape[1]]
+    elbows = [o.forearm_points[:, -1] for _, o in with_forearm]
+    reach = arms = zero
+    if len(hands) == 2:
+        gap = (hands[0].translation - hands[1].translation).norm(dim=1)
+        reach = losses.soft_range(gap, 0.0, r.max_wrist_gap_m, r.margin_m)
+        if len(elbows) == 2:
+            span = (elbows[0] - elbows[1]).norm(dim=1)
+            reach = reach + losses.soft_range(span, 0.0, r.max_elbow_span_m, r.margin_m)
+        reach = w.reach * reach
+    if elbows and w.arms:
+        normal = torch.as_tensor(problem.scene.wall.normal, dtype=zero.dtype, device=zero.device)
+        for (h, _), elbow in zip(with_forearm, elbows):
+            toward_wall = ((h.translation - elbow) @ normal) - BACK_SLACK_M  # wrist's height minus elbow's
+            arms = arms + w.arms * (torch.relu(toward_wall) / r.margin_m) ** 2
+    if elbows and w.elbows_out:
+        xy, _ = level.scene.project(torch.stack(elbows, 1))
+        height, width = level.scene.image.height, level.scene.image.width
+        arms = arms + w.elbows_out * losses.inside_frame(xy, height, width, r.elbow_margin_share * height)
+    return reach, arms
+
+
+def _image_maps(level: Level, blur: float, w: Weights) -> tuple[torch.Tensor, torch.Tensor]:
+    """The blurred target (H, W) and the image term's pixel weights (H, W) at a level: 1, plus
+    the target's thin parts, plus depth inside it, plus (when set) distance outside it and its
+    holes and notches. Constant through a stage."""
+    maps = level.maps
+    target = gaussian_blur(maps.target[None], blur)[0]
+    weight = (
+        1.0
+        + w.thin * gaussian_blur(maps.thin[None], max(blur, 1.0))[0]
+        + w.depth * maps.inside_depth.clamp(max=w.depth_cap)
+    )
+    if w.spill:
+        weight = weight + w.spill * maps.outside_dist.clamp(max=w.depth_cap)
+    if w.notches:
+        weight = weight + w.notches * gaussian_blur(maps.notches[None], blur)[0]
+    return target, weight
+
+
+def _skeleton_terms(level: Level, outs) -> tuple[torch.Tensor, torch.Tensor]:
+    """Unweighted (B,) terms on the projected skeleton: joints and forearm axes outside the
+    target, and the target's thin parts far from every finger segment."""
+    kp = torch.cat([torch.cat([o.keypoints, o.forearm_points], 1) for o in outs], 1)
+    kp_xy, _ = level.scene.project(kp)
+    segments, offset = [], 0
+    for o in outs:
+        k = kp_xy[:, offset : offset + len(KEYPOINT_NAMES)]
+        segments.append(torch.stack([k[:, SEGMENT_STARTS], k[:, SEGMENT_ENDS]], 2))
+        offset += o.keypoints.shape[1] + o.forearm_points.shape[1]
+    return losses.points_outside(kp_xy, level.maps), losses.thin_coverage(torch.cat(segments, 1), level.maps)
+
+
+def anchor_distance(hands: list[HandPoseBatch], anchor: list[HandPoseBatch]) -> torch.Tensor:
+    """(B,) squared distance of each hand's placement from the anchor's (batch 1): wrist
+    travel in units of ANCHOR_TRAVEL_M plus turn in units of ANCHOR_TURN_RAD."""
+    out = 0
+    for h, a in zip(hands, anchor):
+        out = out + (((h.translation - a.translation) / ANCHOR_TRAVEL_M) ** 2).sum(1)
+        out = out + (rotmat_to_rotvec(a.rotation.transpose(-1, -2) @ h.rotation).norm(dim=1) / ANCHOR_TURN_RAD) ** 2
+    return out

@@ -1,0 +1,134 @@
+"""The coarse-to-fine stages: many hypotheses optimised together, ranked by the fit measures
+after each stage, the best kept."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from handshadow.metrics import iou, rank, rank_key, score
+from handshadow.poses import PoseBatch, PoseParameters
+from handshadow.search.config import Stage
+from handshadow.search.loop import optimise
+from handshadow.search.objective import objective
+from handshadow.search.problem import Problem
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass
+class Progress:
+    """What a progress callback sees: stage index, step within it, steps done over all stages,
+    their total, the best hypothesis's current shadow (H, W) numpy at the stage resolution,
+    its IoU, its poses (PoseBatch of batch 1) and its loss terms by name."""
+
+    stage: int
+    step: int
+    done: int
+    total: int
+    shadow: np.ndarray
+    iou: float
+    poses: PoseBatch
+    terms: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class SearchResult:
+    """poses: the best hypothesis (batch 1); steps taken; seconds; whether Ctrl-C or ``stop``
+    ended it; ranking: per surviving hypothesis its index, measures and rank key, best first."""
+
+    poses: PoseBatch
+    steps: int
+    seconds: float
+    interrupted: bool
+    ranking: list[dict]
+
+    @property
+    def key(self) -> tuple:
+        return self.ranking[0]["key"]
+
+
+def run_stages(
+    problem: Problem,
+    starts: PoseBatch,
+    stages: list[Stage],
+    progress: Callable[[Progress], None] | None = None,
+    every: int = 10,
+    deadline_s: float | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> SearchResult:
+    """Optimise the starting hypotheses through the stages, keeping each stage's best.
+    Ctrl-C (KeyboardInterrupt), ``stop`` returning True (checked every step) or the deadline
+    ends it early with the best so far."""
+    t0 = time.perf_counter()
+    total = sum(s.steps for s in stages)
+    done, interrupted = 0, False
+    poses = starts
+    try:
+        for si, stage in enumerate(stages):
+            log.info("stage %d of %d: %d hypotheses at %d px", si + 1, len(stages), poses.batch, stage.height)
+            params = PoseParameters(poses, problem.limits)
+
+            def evaluate(stage=stage, params=params):
+                terms, shadow = objective(problem, params.hands(), stage)
+                return terms.total, (terms, shadow)
+
+            def after(step, seen, si=si, stage=stage, params=params):
+                nonlocal done
+                done += 1
+                if progress and (step % every == 0 or step == stage.steps - 1):
+                    progress(_progress(problem, params, stage, si, step, done, total, *seen))
+                if deadline_s is not None and time.perf_counter() - t0 > deadline_s:
+                    raise TimeoutError
+                return False
+
+            try:
+                optimise(
+                    params,
+                    evaluate,
+                    stage.steps,
+                    problem.rates.scaled(stage.lr_scale),
+                    cosine=True,
+                    after=after,
+                    stop=stop,
+                )
+            finally:
+                poses = params.poses()
+            keep = min(stage.keep, poses.batch)
+            poses = poses.select(rank_at(problem, poses, stage.height)[:keep])
+    except KeyboardInterrupt:
+        interrupted = True
+    except TimeoutError:
+        log.info("search stopped at its time limit")
+    ranking = rank_details(problem, poses)
+    return SearchResult(poses.item(ranking[0]["index"]), done, time.perf_counter() - t0, interrupted, ranking)
+
+
+def _progress(problem, params, stage, si, step, done, total, terms, shadow) -> Progress:
+    loss = terms.total.detach()
+    best = int(torch.argmin(loss))
+    m = shadow.mask[best].detach().cpu().numpy()
+    target = problem.level(stage.height).maps.target.cpu().numpy() > 0.5
+    return Progress(si, step, done, total, m, iou(m > 0.5, target), params.poses().item(best), terms.values(best))
+
+
+def rank_at(problem: Problem, poses: PoseBatch, height: int) -> list[int]:
+    """Hypotheses' indices, best first, by the fit measures at a frame height."""
+    masks = problem.shadows(poses, height).cpu().numpy() > 0.5
+    target = problem.level(height).maps.target.cpu().numpy() > 0.5
+    return rank(masks, target)
+
+
+def rank_details(problem: Problem, poses: PoseBatch) -> list[dict]:
+    """Per hypothesis at full resolution: index, measures and rank key, best first."""
+    masks = problem.shadows(poses).cpu().numpy() > 0.5
+    rows = []
+    for i, m in enumerate(masks):
+        s = score(m, problem.target, problem.thin)
+        rows.append({"index": i, **s.as_dict(), "key": rank_key(s)})
+    return sorted(rows, key=lambda r: r["key"])

@@ -1,0 +1,32 @@
+"""The arm rules: elbows out of the picture, one person's reach."""
+
+import numpy as np
+import pytest
+import torch
+
+from handshadow import losses
+from handshadow.hands.arms import ELBOW_SPAN_M, check_arms
+
+
+def test_forearms_elbows_and_reach_are_reported():
+    inside = np.array([[50.0, 60.0], [300.0, 20.0]])  # the first in a 256 x 256 frame, the second beyond it
+    near = np.array([[0.2, 0.0, 1.0], [-0.2, 0.0, 1.0]])
+    wrists = np.array([1.0, 1.0])
+    check = check_arms(inside, near, np.array([1.1, 0.9]), wrists, 256, 256)
+    assert check.elbows_out == (False, True) and not check.upper_arms_hidden
+    assert check.leads_back == (True, False)  # the second elbow is 10 cm nearer the wall than its wrist
+    assert check.span_m == 0.4 and check.performers == 1 and not check.holdable()
+    far = np.array([[0.6, 0.0, 1.0], [-0.6, 0.0, 1.0]])
+    spread = check_arms(inside, far, np.array([1.1, 1.0]), wrists, 256, 256)
+    assert 1.2 > ELBOW_SPAN_M and spread.performers == 2
+    assert not spread.holdable() and spread.holdable(performers=2)
+
+
+def test_inside_frame_pushes_a_point_out_by_the_nearest_edge():
+    pts = torch.tensor([[[10.0, 50.0], [-5.0, 50.0]]], requires_grad=True)  # 10 px in, and outside
+    cost = losses.inside_frame(pts, 100, 100)
+    assert float(cost[0].detach()) == pytest.approx((10 / 100) ** 2)
+    cost.sum().backward()
+    assert float(pts.grad[0, 0, 0]) > 0 and float(pts.grad[0, 1].abs().sum()) == 0  # out through x = 0
+    # A margin keeps a point that is just outside still pushed.
+    assert float(losses.inside_frame(pts, 100, 100, margin_px=8)[0].detach()) > (10 / 100) ** 2

@@ -1,0 +1,100 @@
+"""The exact penetration test on meshes: hand-made boxes, a hand pushed into the other at a
+known depth, fists, and the finishing step that parts a penetrating result."""
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from handshadow.hands.penetration import TOLERANCE_MM, contact_penalty, hand_parts, penetration
+
+
+def _box(size, centre):
+    m = trimesh.creation.box(extents=size)
+    return np.asarray(m.vertices) + centre, np.asarray(m.faces)
+
+
+@pytest.mark.parametrize("overlap_mm, performable", [(5.0, False), (1.0, True)])
+def test_boxes_overlapping_by_5_mm_fail_and_by_1_mm_pass(overlap_mm, performable):
+    a = _box([0.1, 0.1, 0.1], [0.0, 0.0, 0.0])
+    # A smaller box whose face reaches overlap_mm into the first one: its corners are that deep.
+    b = _box([0.06, 0.06, 0.06], [0.05 + 0.03 - overlap_mm / 1000, 0.0, 0.0])
+    pen = penetration([a[0], b[0]], [a[1], b[1]])
+    assert pen.between_mm == pytest.approx(overlap_mm, abs=1e-6)
+    assert pen.performable() is performable
+    # Apart, nothing is inside.
+    c = _box([0.06, 0.06, 0.06], [0.2, 0.0, 0.0])
+    assert penetration([a[0], c[0]], [a[1], c[1]]).between_mm == 0.0
+
+
+@pytest.fixture(scope="module")
+def right_and_left(hands64):
+    return hands64["right"], hands64["left"]
+
+
+@pytest.mark.parametrize("depth_mm", [2.0, 6.0, 12.0])
+def test_a_finger_pushed_into_the_other_palm_is_found_at_its_depth(right_and_left, depth_mm):
+    right, left = right_and_left
+    a = right(right.rest_pose()).vertices[0].numpy()
+    faces_a = right.faces.numpy()
+    # A point on the right palm's skin and its outward normal (the palm side faces -z in the hand frame).
+    palm_centre = a[hand_parts(right).palm.vertices].mean(0)
+    sq, tri, closest = _nearest(palm_centre + np.array([0.0, 0.0, -0.1]), a, faces_a)
+    t = a[faces_a[tri]]
+    normal = np.cross(t[1] - t[0], t[2] - t[0])
+    normal /= np.linalg.norm(normal)
+    # The left hand points its index finger straight at that point, its tip depth_mm inside.
+    out = left(left.rest_pose())
+    b = out.vertices[0].numpy()
+    tip = out.keypoints[0, 8].numpy()  # index fingertip
+    along = tip - out.keypoints[0, 5].numpy()
+    rot = _rotation_from_to(along / np.linalg.norm(along), -normal)
+    b = (b - tip) @ rot.T
+    extreme = b[np.argmax(b @ -normal)]  # the vertex that reaches farthest toward the palm
+    b = b - extreme + closest - normal * depth_mm / 1000
+    pen = penetration([a, b], [faces_a, left.faces.numpy()])
+    assert pen.between_mm == pytest.approx(depth_mm, abs=0.5)
+
+
+def _nearest(point, v, f):
+    import igl
+
+    sq, tri, closest = igl.point_mesh_squared_distance(point[None], v, f.astype(np.int64))
+    return sq[0], tri[0], closest[0]
+
+
+def _rotation_from_to(u, v):
+    axis = np.cross(u, v)
+    s, c = np.linalg.norm(axis), u @ v
+    if s < 1e-12:
+        return np.eye(3)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]]) / s
+    return np.eye(3) + s * k + (1 - c) * k @ k
+
+
+def test_a_tight_fist_passes_into_its_palm_and_an_open_one_does_not(right_and_left):
+    right, _ = right_and_left
+    parts = hand_parts(right)
+    assert all(len(p.loops) == 1 for p in parts.fingers) and len(parts.palm.loops) == 5
+
+    def fist(scale):
+        pose = right.rest_pose()
+        for f in range(1, 5):
+            pose[0, 3 * f : 3 * f + 3, 2] = torch.tensor(np.radians([80.0, 95.0, 60.0])) * scale
+        return right(pose).vertices[0].numpy()
+
+    assert penetration([fist(1.0)], [right.faces.numpy()], [parts]).within_mm[0] > 10
+    assert penetration([fist(0.0)], [right.faces.numpy()], [parts]).within_mm[0] == 0.0
+    assert penetration([fist(0.6)], [right.faces.numpy()], [parts]).within_mm[0] <= TOLERANCE_MM
+
+
+def test_the_contact_penalty_pushes_an_inside_vertex_out():
+    a = _box([0.1, 0.1, 0.1], [0.0, 0.0, 0.0])
+    b = _box([0.06, 0.06, 0.06], [0.075, 0.0, 0.0])  # 5 mm inside
+    pen = penetration([a[0], b[0]], [a[1], b[1]])
+    verts = [torch.as_tensor(a[0])[None], torch.as_tensor(b[0])[None].requires_grad_(True)]
+    cost = contact_penalty(verts, pen.contacts, margin_m=0.0)
+    assert float(cost[0].detach()) > 0
+    cost.sum().backward()
+    push = -verts[1].grad[0][pen.contacts.vertex[pen.contacts.mesh == 1]]
+    assert (push[:, 0] > 0).all()  # out along the first box's +x face
