@@ -181,6 +181,17 @@ def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", qu
     p.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log details")
 
 
+def cmd_print(args: argparse.Namespace) -> int:
+    from handshadow.export.printing import print_result
+
+    report = print_result(
+        args.result, out=args.out, height_mm=args.height_mm, stand=not args.no_stand, min_wall_mm=args.min_wall_mm
+    )
+    for line in report.lines():
+        print(line)
+    return 0
+
+
 def cmd_app(args: argparse.Namespace) -> int:
     if args.port is not None and not 0 < args.port < 65536:
         raise HandshadowError(f"--port must be 1..65535, got {args.port}")
@@ -224,6 +235,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default: out/<a>-to-<b>)")
     _add_fit_options(p, hands_default="2", quality_default="best")  # both ends must be good: a morph is judged by them
     p.set_defaults(func=cmd_interpolate)
+
+    p = sub.add_parser("print", help="a 3D-printable sculpture of a result's hands, on a stand, with the torch's place")
+    p.add_argument("result", help="a result folder written by 'fit' or 'render'")
+    p.add_argument("--out", help="the mesh file, .stl or .3mf (default: RESULT/print.stl and print.3mf)")
+    p.add_argument("--height-mm", type=float, default=150.0, help="height of the whole print (default 150)")
+    p.add_argument("--no-stand", action="store_true", help="the hands alone, without board, foot and rods")
+    p.add_argument("--min-wall-mm", type=float, default=1.2, help="thinnest part the printer makes (default 1.2)")
+    p.set_defaults(func=cmd_print)
 
     p = sub.add_parser("app", help="a local web page to make hand shadows (needs the [app] extra: Gradio)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1, this computer only)")
