@@ -276,17 +276,32 @@ def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[Fi
     except Exception as exc:  # a fit's error, in words
         yield FitUpdate(None, f"**The fit stopped:** {in_words(exc, source)}")
         return
+    yield FitUpdate(None, "Making the model to 3D-print..." + note, fraction=1.0)
+    printed = printable(result_folder)
     zip_path = shutil.make_archive(str(folder / "handshadow-result"), "zip", result_folder)
     status = (
         ("Cancelled: best result so far. " if result.interrupted else "")
         + str(result.score)
         + (" (a success)" if result.success else "")
         + note
+        + f"  \n{printed}"
         + "\n\n"
         + "\n".join(line.strip() for line in [*performance_lines(result), *lines])
     )
     overlay = enlarged(iio.imread(result_folder / "overlay.png"))
     yield FitUpdate(overlay, status, {"folder": str(result_folder), "zip": zip_path})
+
+
+def printable(result_folder: Path) -> str:
+    """Write print.stl (and print.3mf, print.json, print.png) into a result folder; one line
+    for the page on what the zip holds."""
+    from handshadow.export.printing import print_result
+
+    try:
+        report = print_result(result_folder)
+    except HandshadowError as exc:
+        return f"No model to 3D-print: {exc}"
+    return f"The zip holds print.stl, {report.height_mm:.0f} mm tall, with print.png telling where the torch goes."
 
 
 def result_files(finished: dict) -> tuple[str, ...]:

@@ -43,6 +43,7 @@ RESULT_FILES = {
     "hands.glb",
     "guide.png",
     "progress.gif",
+    "print.stl",  # the model to 3D-print (handshadow print)
 }
 
 playwright = pytest.importorskip("playwright.sync_api")
