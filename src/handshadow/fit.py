@@ -22,7 +22,7 @@ from handshadow.hands.arms import ArmCheck, check_arms
 from handshadow.hands.limits import JointLimits
 from handshadow.hands.penetration import Penetration, hand_parts, penetration
 from handshadow.hands.posed import PosedMesh, cast_shadow
-from handshadow.metrics import FitScore, score
+from handshadow.metrics import FitScore, iou, score
 from handshadow.posefile import parse_pose
 from handshadow.poses import PoseBatch, PosedScene
 from handshadow.scene import Scene
@@ -118,6 +118,8 @@ class HandCountFit:
     sides: list[str]
     problem: Problem
     search: SearchResult
+    left_mm: float | None = None  # how deep the search's result went into other flesh (exact test)
+    separation_iou: float | None = None  # the shadow after the separation against before it
 
     def preference_key(self) -> tuple:
         """Rank key with the one-hand preference: smaller is better."""
@@ -251,7 +253,9 @@ def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: flo
 
     interrupted = False
     try:  # the separation always runs to its end after a stopped search: a result must not penetrate
+        chosen.left_mm = problem.mesh_penetration(res.poses)[0].deepest_mm
         poses = separate(problem, res.poses, stop=None if res.interrupted else stop)
+        chosen.separation_iou = float(iou(problem.shadows(poses)[0], problem.shadows(res.poses)[0]))
         if not res.interrupted:
             rounds, near_rounds = POLISH_ROUNDS[config.quality]
             generator = torch.Generator(device="cpu").manual_seed(config.seed)
@@ -279,6 +283,10 @@ def _result(target, scene, chosen: HandCountFit, poses: PoseBatch, config, steps
     )
     arms = arm_check(chosen.problem, poses)
     info = fit_info(sc, pen, arms, chosen.problem.reach.performers)
+    info.update(
+        search_penetration_mm=None if chosen.left_mm is None else round(chosen.left_mm, 2),
+        separation_shadow_iou=None if chosen.separation_iou is None else round(chosen.separation_iou, 4),
+    )
     info.update(
         iterations=steps,
         seconds=round(seconds, 2),
