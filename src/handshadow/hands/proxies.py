@@ -17,6 +17,7 @@ from handshadow.hands.forearm import FOREARM_LENGTH_M, forearm_axis, forearm_sca
 from handshadow.hands.rig import N_JOINTS, HandRig
 
 SHRINK = 0.85  # radius factor: contact is allowed, overlap beyond it is penetration
+RADIUS_PERCENTILE = 50  # a finger sphere's radius: this percentile of its vertices' distances from the bone
 PALM, FOREARM = 5, 6  # part ids after the fingers 0..4 (thumb..little)
 
 
@@ -52,7 +53,7 @@ def hand_spheres(rig: HandRig, forearm: bool = True, per_segment: int = 3) -> Sp
         if len(own) == 0:
             continue
         t = np.clip((own - start) @ axis / length**2, 0, 1)
-        radius = np.median(np.linalg.norm(own - (start + t[:, None] * axis), axis=1)) * SHRINK
+        radius = np.percentile(np.linalg.norm(own - (start + t[:, None] * axis), axis=1), RADIUS_PERCENTILE) * SHRINK
         for k in range(per_segment):
             s = (k + 0.5) / per_segment
             if seg == 2:
