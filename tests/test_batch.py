@@ -6,6 +6,7 @@ Four tiny targets (built-in examples) at --quality fast --size 64, one hand and 
 a fit takes seconds: the test is about the batch, not about the fits' quality."""
 
 import csv
+import importlib.util
 import json
 import os
 import signal
@@ -227,6 +228,11 @@ def test_inputs_folders_globs_files_and_examples(tmp_path):
         (["dog", "--scheduler", "tcp://127.0.0.1:1", "--threads-per-worker", "2"], "sizes the local cluster"),
         (["dog", "--scheduler", "nowhere"], "cannot reach a Dask scheduler at nowhere"),
         (["dog", "--size", "8"], "--size must be between"),
+        pytest.param(
+            ["dog", "--dashboard"],
+            "--dashboard needs bokeh",
+            marks=pytest.mark.skipif(importlib.util.find_spec("bokeh") is not None, reason="bokeh is installed"),
+        ),
     ],
 )
 def test_bad_inputs_and_options_fail_cleanly(tmp_path, args, message):

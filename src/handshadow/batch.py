@@ -33,6 +33,7 @@ import logging
 import os
 import statistics
 import time
+import urllib.parse
 import uuid
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
@@ -308,22 +309,16 @@ def open_cluster(
 
     level = logging.ERROR if quiet_logs else logging.WARNING
     logging.getLogger("distributed").setLevel(level)
-    if dashboard:
-        try:
-            import bokeh  # noqa: F401
-        except ImportError:
-            raise BatchError("--dashboard needs bokeh: pip install 'bokeh>=3.1'") from None
     if scheduler:
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, ValueError, TypeError) as exc:
             raise BatchError(f"cannot reach a Dask scheduler at {scheduler}: {_one_line(exc)}") from None
         with client:
-            info = client.scheduler_info()
-            n = len(info.get("workers", {}))
+            n = len(client.nthreads())
             link = f", dashboard {client.dashboard_link}" if dashboard else ""
             waiting = " (the batch waits for workers to join)" if n == 0 else ""
-            yield client, f"Dask scheduler {scheduler}: {n} workers{link}{waiting}"
+            yield client, f"Dask scheduler {scheduler}: {n} worker{'s' * (n != 1)}{link}{waiting}"
         return
     n, threads = local_cluster_size(workers, threads_per_worker)
     cluster = LocalCluster(
@@ -370,6 +365,11 @@ def run_batch(
     starts a target (again if it is rerun after a worker died). No cluster is started when
     there is nothing to fit. Ctrl-C cancels what is running, keeps what is finished (summary
     included), shuts a local cluster down and raises KeyboardInterrupt; a rerun goes on."""
+    if dashboard:
+        try:
+            import bokeh  # noqa: F401
+        except ImportError:
+            raise BatchError("--dashboard needs bokeh: pip install 'bokeh>=3.1'") from None
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise BatchError(f"output path {out} exists and is not a folder")
@@ -480,8 +480,10 @@ def _read_target(t: Target, invert: bool | None) -> tuple[str, bytes]:
 
 
 def _has_fit_resource(client) -> bool:
-    workers = client.scheduler_info().get("workers", {}).values()
-    return any(w.get("resources", {}).get(FIT_RESOURCE, 0) >= 1 for w in workers)
+    """Whether any worker offers the ``fit`` resource (else tasks must not ask for it)."""
+    return client.run_on_scheduler(
+        lambda dask_scheduler: any(ws.resources.get(FIT_RESOURCE, 0) >= 1 for ws in dask_scheduler.workers.values())
+    )
 
 
 def _collect(t: Target, future, out: Path, starts: int, settings: dict) -> dict:
@@ -599,7 +601,7 @@ def index_html(report: BatchReport) -> str:
     body = []
     for row in sorted(report.rows, key=_sort_key):
         name = esc(row["name"])
-        href = esc(f"{row['name']}/", quote=True)
+        href = esc(urllib.parse.quote(f"{row['name']}/"), quote=True)
         if row["status"] in ("failed", "pending"):
             state = "failed" if row["status"] == "failed" else "not run"
             body.append(

@@ -1,7 +1,8 @@
 """Command line: arguments -> configuration -> pipeline. No tensor code here.
 
 Every expected failure (bad input, missing files, unusable output folder) ends with a one-line
-message on stderr and exit status 2; an interrupt exits with 130.
+message on stderr and exit status 2; an interrupt exits with 130; a batch in which some
+targets failed (and the others were fitted) exits with 1.
 """
 
 from __future__ import annotations
