@@ -177,7 +177,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
     config = _fit_config(args, resolve=False)
     say = (lambda line: None) if args.quiet else print
     # A job runner's SIGTERM ends the batch as Ctrl-C does: finished results kept, cluster shut down.
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    on_term = signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         report = run_batch(
             targets,
@@ -198,6 +198,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_INTERRUPTED
+    finally:
+        signal.signal(signal.SIGTERM, on_term)
     m = report.medians()
     say(f"results in {report.out}/ (index.html, summary.csv)")
     print(
