@@ -216,11 +216,12 @@ def make_plan(targets: list[Target], out: Path, settings: dict, force: bool = Fa
 
 
 def settings_of(config, invert: bool | None) -> dict:
-    """The fit settings that make results comparable (not the device or where MANO lives)."""
+    """The fit settings that make results comparable (not the device or where MANO lives), as
+    batch.json stores them (tuples become lists)."""
     d = dataclasses.asdict(config)
     for k in ("device", "mano_dir", "time_limit_s"):
         d.pop(k, None)
-    return {**d, "invert": invert}
+    return json.loads(json.dumps({**d, "invert": invert}))
 
 
 def read_record(out: Path) -> dict[str, dict]:
