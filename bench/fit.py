@@ -1,119 +1,115 @@
 """Fit benchmark: fit every image in the given folders with default settings and judge each
 result as docs/metrics.md defines (IoU, boundary F1 at 2 px, HD95, thin-part recall,
-success).
+success). It runs on `handshadow batch` (Dask), so it scales out with --workers or --scheduler.
 
-    python bench/fit.py ../shared/targets/hsp [--limit N] [--hands 2] [--out out/bench]
+    python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
+                        [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
 
-Prints one row per target, writes a contact sheet (target | shadow | overlay per row), each
-shadow (shadows/NAME.png) and a JSON of the rows to --out, and ends with
+Prints one row per target as it finishes (the fit's other measures, whatever pose.json's "fit"
+holds, as key=value), writes a contact sheet (target | shadow | overlay per row), the result
+folders (NAME/), summary.csv, index.html and a JSON of the rows to --out, and ends with
 SUMMARY n=<n> median_iou=<x> success=<share> median_s=<x>
+(s: the fit's own seconds, as `handshadow fit` reports them, without start-up or export.)
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import statistics
+import os
 import sys
-import time
 from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
-import torch
 
-from handshadow.export.images import overlay_image
-from handshadow.fit import FitConfig, fit_frame
-from handshadow.target import TargetError, load_target
+from handshadow.batch import find_targets, run_batch
+from handshadow.fit import FitConfig
 
-EXTENSIONS = {".png", ".jpg", ".jpeg", ".gif", ".bmp"}
+#: Columns of the table; every other measure of the fit is printed after them as key=value.
+TABLE = {"iou": "IoU", "boundary_f1": "F1@2", "hd95": "HD95", "thin_recall": "thin"}
+NOT_MEASURES = {"name", "hands", "success", "seconds", "worker", "error", "status", "attempts", "task_s", "source"}
+NOT_MEASURES |= {"iterations", "seed", "limits", "quality", "interrupted"}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("folders", nargs="+")
+    parser.add_argument("folders", nargs="+", help="folders of images (or images, globs)")
     parser.add_argument("--limit", type=int, help="at most this many targets (spread over the sorted list)")
     parser.add_argument("--hands", default="auto", choices=["1", "2", "auto"])
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--quality", default="default", choices=["fast", "default", "best"])
     parser.add_argument("--names", help="comma-separated file stems to run (a subset)")
-    parser.add_argument("--out", default="out/bench", help="folder for the contact sheet and rows")
+    parser.add_argument("--out", default="out/bench", help="folder for the results, contact sheet and rows")
     parser.add_argument("--device", default="cpu")
+    parser.add_argument("--workers", type=int, default=1, help="local Dask workers, each fitting one target at a time")
+    parser.add_argument("--threads-per-worker", type=int, help="torch threads per worker (default: cores / workers)")
+    parser.add_argument("--scheduler", help="an existing Dask cluster instead of a local one")
+    parser.add_argument("--resume", action="store_true", help="keep complete result folders in --out (default: refit)")
     args = parser.parse_args()
-    files = sorted(p for folder in args.folders for p in Path(folder).iterdir() if p.suffix.lower() in EXTENSIONS)
+    targets = sorted(find_targets(args.folders), key=lambda t: t.source)
     if args.names:
         wanted = set(args.names.split(","))
-        files = [f for f in files if f.stem in wanted]
-    if args.limit and args.limit < len(files):
-        files = (
-            [files[round(i * (len(files) - 1) / (args.limit - 1))] for i in range(args.limit)]
+        targets = [t for t in targets if t.name in wanted]
+    if args.limit and args.limit < len(targets):
+        targets = (
+            [targets[round(i * (len(targets) - 1) / (args.limit - 1))] for i in range(args.limit)]
             if args.limit > 1
-            else files[:1]
+            else targets[:1]
         )
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    threads = args.threads_per_worker or max(1, cores // args.workers)
+    where = args.scheduler or f"{args.workers} workers x {threads} torch threads"
     print(
-        f"{len(files)} targets, hands={args.hands}, size={args.size}, quality={args.quality}, device={args.device}, torch threads={torch.get_num_threads()}"
+        f"{len(targets)} targets, hands={args.hands}, size={args.size}, quality={args.quality}, device={args.device}, {where}"
     )
-    print(f"{'target':24s} {'IoU':>6s} {'F1@2':>6s} {'HD95':>6s} {'thin':>6s} {'ok':>3s} {'s':>6s}")
-    rows, tiles = [], []
-    for path in files:
-        try:
-            target = load_target(path, args.size, args.size)
-        except TargetError as exc:
-            print(f"{path.stem:24s} skipped: {exc}")
-            continue
-        t0 = time.perf_counter()
-        result = fit_frame(
-            target, FitConfig(hands=args.hands, size=args.size, quality=args.quality, device=args.device)
-        )
-        seconds = time.perf_counter() - t0
-        s = result.score
-        row = {
-            "target": str(path),
-            "iou": s.iou,
-            "f1": s.boundary_f1,
-            "hd95": s.hd95,
-            "thin": s.thin_recall,
-            "success": s.success,
-            "seconds": seconds,
-            "hands": len(result.posed.hands),
-        }
-        rows.append(row)
-        print(
-            f"{path.stem:24s} {s.iou:6.3f} {s.boundary_f1:6.3f} {s.hd95:6.3f} {s.thin_recall:6.2f} {'yes' if s.success else 'no':>3s} {seconds:6.1f}",
-            flush=True,
-        )
-        tiles.append(_sheet_row(target, result.shadow, path.stem, s.success))
-        (out / "shadows").mkdir(exist_ok=True)
-        iio.imwrite(out / "shadows" / f"{path.stem}.png", np.where(result.shadow, 0, 255).astype(np.uint8))
-        (out / "rows.json").write_text(json.dumps(rows, indent=1))
-    if tiles:
-        iio.imwrite(out / "contact_sheet.png", np.concatenate(tiles, 0))
-    n = len(rows)
-    median_iou = statistics.median(r["iou"] for r in rows) if rows else float("nan")
-    success = sum(r["success"] for r in rows) / n if n else float("nan")
-    median_s = statistics.median(r["seconds"] for r in rows) if rows else float("nan")
-    print(f"contact sheet: {out / 'contact_sheet.png'}")
-    print(f"SUMMARY n={n} median_iou={median_iou:.3f} success={success:.3f} median_s={median_s:.1f}")
+    print(f"{'target':24s} {'IoU':>6s} {'F1@2':>6s} {'HD95':>6s} {'thin':>6s} {'ok':>3s} {'s':>6s}", flush=True)
+    config = FitConfig(hands=args.hands, size=args.size, quality=args.quality, device=args.device)
+    report = run_batch(
+        targets,
+        args.out,
+        config,
+        force=not args.resume,
+        workers=None if args.scheduler else args.workers,
+        threads_per_worker=None if args.scheduler else threads,
+        scheduler=args.scheduler,
+        show_progress=False,
+        say=lambda line: None,
+        on_row=print_row,
+    )
+    out = Path(args.out)
+    rows = report.fitted
+    (out / "rows.json").write_text(json.dumps(rows, indent=1))
+    if rows:
+        iio.imwrite(out / "contact_sheet.png", np.concatenate([_sheet_row(out / r["name"], r["success"]) for r in rows], 0))
+    m = report.medians()
+    print(f"contact sheet: {out / 'contact_sheet.png'}; results: {out / 'index.html'}")
+    print(f"SUMMARY n={m['n']} median_iou={m['median_iou']:.3f} success={m['success']:.3f} median_s={m['median_s']:.1f}")
     sys.stdout.flush()
 
 
-def _sheet_row(target: np.ndarray, shadow: np.ndarray, name: str, success: bool, tile: int = 128) -> np.ndarray:
+def print_row(row: dict) -> None:
+    if row["status"] == "failed":
+        print(f"{row['name']:24s} skipped: {row['error']}", flush=True)
+        return
+    table = " ".join(f"{row[k]:6.3f}" if k != "thin_recall" else f"{row[k]:6.2f}" for k in TABLE)
+    extra = " ".join(f"{k}={v}" for k, v in row.items() if k not in NOT_MEASURES and k not in TABLE and v != "")
+    ok = "yes" if row["success"] else "no"
+    print(f"{row['name']:24s} {table} {ok:>3s} {row['seconds']:6.1f} {extra}".rstrip(), flush=True)
+
+
+def _sheet_row(folder: Path, success: bool, tile: int = 128) -> np.ndarray:
+    """target | shadow | overlay of a result folder, ``tile`` pixels high, with a green or
+    red bar on top."""
     from skimage.transform import resize
 
-    def small(img):
-        return (
-            resize(img.astype(float), (tile, tile * img.shape[1] // img.shape[0]), order=1, anti_aliasing=True) * 255
-        ).astype(np.uint8)
+    def small(name: str) -> np.ndarray:
+        img = iio.imread(folder / name)
+        img = np.repeat(img[..., None], 3, -1) if img.ndim == 2 else img[..., :3]
+        size = (tile, tile * img.shape[1] // img.shape[0])
+        return (resize(img.astype(float) / 255, size, order=1, anti_aliasing=True) * 255).astype(np.uint8)
 
-    t = 255 - small(target)
-    s = 255 - small(shadow)
-    grey = [np.stack([x] * 3, -1) for x in (t, s)]
-    ov = (resize(overlay_image(target, shadow).astype(float) / 255, (tile, grey[0].shape[1]), order=1) * 255).astype(
-        np.uint8
-    )
-    row = np.concatenate(grey + [ov], 1)
+    row = np.concatenate([small(name) for name in ("target.png", "shadow.png", "overlay.png")], 1)
     row[:3, :, :] = (60, 170, 60) if success else (200, 60, 60)  # a green or red bar per row
     return row
 

@@ -1,7 +1,8 @@
 """Command line: arguments -> configuration -> pipeline. No tensor code here.
 
 Every expected failure (bad input, missing files, unusable output folder) ends with a one-line
-message on stderr and exit status 2; an interrupt exits with 130.
+message on stderr and exit status 2; an interrupt exits with 130; a batch in which some
+targets failed (and the others were fitted) exits with 1.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 from handshadow import examples
 from handshadow.errors import HandshadowError
 
+EXIT_FAILED_TARGETS = 1  # batch: every target was tried, some could not be fitted
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
@@ -97,7 +99,9 @@ def _check_target(source: str, invert: bool | None = None) -> None:
         print(f"handshadow: warning: {source}: {target.warning}", file=sys.stderr)
 
 
-def _fit_config(args: argparse.Namespace):
+def _fit_config(args: argparse.Namespace, resolve: bool = True):
+    """A FitConfig from the fit options; ``resolve=False`` leaves the device as given (a batch
+    resolves it on each worker)."""
     from handshadow.fit import FitConfig
 
     if args.size < 32 or args.size > 2048:
@@ -108,7 +112,7 @@ def _fit_config(args: argparse.Namespace):
         hands=args.hands,
         size=args.size,
         iters=args.iters,
-        device=resolve_device(args.device),
+        device=resolve_device(args.device) if resolve else args.device,
         seed=args.seed,
         hand_model=args.hand_model,
         mano_dir=args.mano_dir,
@@ -147,7 +151,12 @@ def cmd_interpolate(args: argparse.Namespace) -> int:
     return EXIT_INTERRUPTED if report.interrupted else 0
 
 
-def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", quality_default: str = "default") -> None:
+def _add_fit_options(
+    p: argparse.ArgumentParser,
+    hands_default: str = "auto",
+    quality_default: str = "default",
+    force_help: str = "write into a non-empty folder",
+) -> None:
     p.add_argument(
         "--hands",
         default=hands_default,
@@ -176,7 +185,7 @@ def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", qu
         choices=[1, 2],
         help="people holding the hands (default 1; 2 lifts the limit on how far apart the arms are)",
     )
-    p.add_argument("--force", action="store_true", help="write into a non-empty folder")
+    p.add_argument("--force", action="store_true", help=force_help)
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log details")
 
@@ -190,6 +199,52 @@ def cmd_print(args: argparse.Namespace) -> int:
     for line in report.lines():
         print(line)
     return 0
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    import signal
+
+    from handshadow.batch import find_targets, run_batch
+
+    for flag, value in (("--workers", args.workers), ("--threads-per-worker", args.threads_per_worker)):
+        if value is not None and value < 1:
+            raise HandshadowError(f"{flag} must be positive, got {value}")
+        if value is not None and args.scheduler:
+            raise HandshadowError(f"{flag} sizes the local cluster; the workers of --scheduler keep their own")
+    targets = find_targets(args.inputs)
+    config = _fit_config(args, resolve=False)
+    say = (lambda line: None) if args.quiet else print
+    # A job runner's SIGTERM ends the batch as Ctrl-C does: finished results kept, cluster shut down.
+    on_term = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        report = run_batch(
+            targets,
+            args.out,
+            config,
+            invert=args.invert,
+            force=args.force,
+            workers=args.workers,
+            threads_per_worker=args.threads_per_worker,
+            scheduler=args.scheduler,
+            dashboard=args.dashboard,
+            show_progress=not args.quiet,
+            say=say,
+        )
+    except KeyboardInterrupt:
+        print(
+            f"handshadow: interrupted; finished results are kept in {args.out}/ (run the same command to go on)",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+    finally:
+        signal.signal(signal.SIGTERM, on_term)
+    m = report.medians()
+    say(f"results in {report.out}/ (index.html, summary.csv)")
+    print(
+        f"SUMMARY n={m['n']} failed={len(report.failed)} median_iou={m['median_iou']:.3f} "
+        f"success={m['success']:.3f} median_s={m['median_s']:.1f}"
+    )
+    return EXIT_FAILED_TARGETS if report.failed else 0
 
 
 def cmd_app(args: argparse.Namespace) -> int:
@@ -243,6 +298,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-stand", action="store_true", help="the hands alone, without board, foot and rods")
     p.add_argument("--min-wall-mm", type=float, default=1.2, help="thinnest part the printer makes (default 1.2)")
     p.set_defaults(func=cmd_print)
+
+    p = sub.add_parser("batch", help="fit many targets on a Dask cluster (local by default), one folder each")
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="image files, folders of images, globs or example names")
+    p.add_argument("--out", required=True, help="output folder: OUT/NAME/ per target, summary.csv, index.html")
+    p.add_argument("--workers", type=int, help="local cluster: worker processes (default: fitted to cores and memory)")
+    p.add_argument("--threads-per-worker", type=int, help="local cluster: threads (torch threads) per worker (default 1)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="use an existing Dask cluster, e.g. tcp://HOST:8786")
+    p.add_argument("--dashboard", action="store_true", help="serve the Dask dashboard (needs bokeh)")
+    _add_fit_options(p, force_help="fit again the targets whose folders are complete")
+    p.add_argument("--invert", action="store_true", default=None, help="the shapes are lighter than the ground")
+    p.set_defaults(func=cmd_batch)
 
     p = sub.add_parser("app", help="a local web page to make hand shadows (needs the [app] extra: Gradio)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1, this computer only)")

@@ -18,10 +18,12 @@ class OutputError(HandshadowError):
 
 
 class ResultFolder:
-    """Collects a result in a hidden sibling folder and moves it into place on ``commit``.
+    """Collects a result in a hidden sibling folder and renames it into place on ``commit``.
 
     A non-empty target folder is refused unless ``force``. If anything fails (or the process is
-    interrupted) before ``commit``, the target folder is left as it was.
+    interrupted or killed) before ``commit``, the target folder is left as it was; ``commit``
+    swaps whole folders by rename, so the target never holds part of a result, even when the
+    process dies in the middle of it.
 
         with ResultFolder(out, force) as folder:
             write_png(folder / "shadow.png", image)
@@ -49,14 +51,24 @@ class ResultFolder:
         return self.staging / name
 
     def commit(self) -> Path:
-        """Move every staged file into the target folder (replacing same-named files)."""
-        self.path.mkdir(parents=True, exist_ok=True)
-        for item in sorted(self.staging.iterdir()):
-            dest = self.path / item.name
-            if dest.is_dir() and not dest.is_symlink():
-                shutil.rmtree(dest)
-            os.replace(item, dest)
-        self.staging.rmdir()
+        """Put the staged files in place of the target folder; files already there that the
+        result does not have are kept (same-named ones are replaced).
+
+        A missing or empty target folder is replaced by one rename. A non-empty one (``force``)
+        first lends its other files to the staged folder (hard links, else copies), then is
+        renamed aside, the staged folder renamed in, and the old one removed: at every instant
+        the target is the old result or the new one, never a mix."""
+        if self.path.is_dir() and any(self.path.iterdir()):
+            for item in self.path.iterdir():
+                if not os.path.lexists(self.staging / item.name):
+                    _link_or_copy(item, self.staging / item.name)
+            old = self.path.parent / f".{self.path.name}.old-{os.getpid()}"
+            shutil.rmtree(old, ignore_errors=True)
+            os.replace(self.path, old)
+            os.replace(self.staging, self.path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(self.staging, self.path)  # rename(2) replaces an empty folder at once
         return self.path
 
     def __exit__(self, *exc) -> None:
@@ -99,6 +111,24 @@ class StagedFiles:
     def __exit__(self, *exc) -> None:
         for staged in self.staged.values():
             staged.unlink(missing_ok=True)
+
+
+def _link_or_copy(src: Path, dest: Path) -> None:
+    """Hard-link a file (or a folder's files) to dest, copying where links are not possible;
+    symbolic links stay links."""
+
+    def link(a, b):
+        try:
+            os.link(a, b)
+        except OSError:
+            shutil.copy2(a, b)
+
+    if src.is_symlink():
+        os.symlink(os.readlink(src), dest)
+    elif src.is_dir():
+        shutil.copytree(src, dest, copy_function=link, symlinks=True)
+    else:
+        link(src, dest)
 
 
 def write_png(path: Path, image: np.ndarray) -> None:
