@@ -370,8 +370,9 @@ def make_problem(
     target: np.ndarray, scene: Scene, sides: list[str], config: FitConfig, anchor: PoseBatch | None = None
 ) -> Problem:
     """The search's context for a target frame (H, W) bool: the config's hand model for each
-    side ('right', 'left') and their joint limits (float32, on the config's device)."""
+    side ('right', 'left') and their joint limits (float32, on the config's device; 'auto' resolved)."""
     dtype = torch.float32
+    config = dataclasses.replace(config, device=resolve_device(config.device))
     models = [
         load_hand(
             config.hand_model, s, mano_dir=config.mano_dir, forearm=config.forearm, dtype=dtype, device=config.device
