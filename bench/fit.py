@@ -5,11 +5,19 @@ success). It runs on `handshadow batch` (Dask), so it scales out with --workers 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
                         [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
 
-Prints one row per target as it finishes (the fit's other measures, whatever pose.json's "fit"
-holds, as key=value), writes a contact sheet (target | shadow | overlay per row), the result
-folders (NAME/), summary.csv, index.html and a JSON of the rows to --out, and ends with
-SUMMARY n=<n> median_iou=<x> success=<share> median_s=<x>
-(s: the fit's own seconds, as `handshadow fit` reports them, without start-up or export.)
+Prints one row per target as it finishes: the shadow's measures, the deepest penetration
+between or within the hands (pen, mm, exact on the meshes), whether the pose can be held
+(perf), whether the shadow alone passes (shadow) and the success test (ok: shadow and
+performable), then the fit's other measures (whatever pose.json's "fit" holds) as key=value.
+It writes a contact sheet (target | shadow | overlay per row), the result folders (NAME/),
+summary.csv, index.html and a JSON of the rows to --out. The targets whose frame has a hole
+of at least HOLE_SHARE of its area (found in each written target.png) are listed as a group.
+It ends with
+SUMMARY n=<n> median_iou=<x> success=<share> shadow_success=<share> performable_success=<share>
+        penetrating_share=<share over 3 mm> median_s=<x> holes_n=<n> holes_success=<share>
+(success and performable_success are the same number: this project's success test counts a
+result only when it is performable; s: the fit's own seconds, as `handshadow fit` reports
+them, without start-up or export.)
 """
 
 from __future__ import annotations
@@ -22,14 +30,19 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
+from scipy import ndimage
 
 from handshadow.batch import find_targets, run_batch
 from handshadow.fit import FitConfig
+from handshadow.hands.penetration import TOLERANCE_MM as PENETRATION_TOLERANCE_MM
 
 #: Columns of the table; every other measure of the fit is printed after them as key=value.
 TABLE = {"iou": "IoU", "boundary_f1": "F1@2", "hd95": "HD95", "thin_recall": "thin"}
 NOT_MEASURES = {"name", "hands", "success", "seconds", "worker", "error", "status", "attempts", "task_s", "source"}
-NOT_MEASURES |= {"iterations", "seed", "limits", "quality", "interrupted"}
+NOT_MEASURES |= {"iterations", "seed", "limits", "quality", "interrupted", "penetration_mm", "performable"}
+NOT_MEASURES |= {"shadow_success"}
+#: A target belongs to the holes group when a hole of its frame covers at least this share of it.
+HOLE_SHARE = 0.005
 
 
 def main() -> None:
@@ -63,7 +76,11 @@ def main() -> None:
     print(
         f"{len(targets)} targets, hands={args.hands}, size={args.size}, quality={args.quality}, device={args.device}, {where}"
     )
-    print(f"{'target':24s} {'IoU':>6s} {'F1@2':>6s} {'HD95':>6s} {'thin':>6s} {'ok':>3s} {'s':>6s}", flush=True)
+    print(
+        f"{'target':24s} {'IoU':>6s} {'F1@2':>6s} {'HD95':>6s} {'thin':>6s} {'pen':>5s} {'perf':>4s} {'shadow':>6s}"
+        f" {'ok':>3s} {'s':>6s}",
+        flush=True,
+    )
     config = FitConfig(hands=args.hands, size=args.size, quality=args.quality, device=args.device)
     report = run_batch(
         targets,
@@ -81,11 +98,38 @@ def main() -> None:
     rows = report.fitted
     (out / "rows.json").write_text(json.dumps(rows, indent=1))
     if rows:
-        iio.imwrite(out / "contact_sheet.png", np.concatenate([_sheet_row(out / r["name"], r["success"]) for r in rows], 0))
+        iio.imwrite(
+            out / "contact_sheet.png", np.concatenate([_sheet_row(out / r["name"], r["success"]) for r in rows], 0)
+        )
     m = report.medians()
+    holes = [r for r in rows if largest_hole_share(out / r["name"] / "target.png") >= HOLE_SHARE]
     print(f"contact sheet: {out / 'contact_sheet.png'}; results: {out / 'index.html'}")
-    print(f"SUMMARY n={m['n']} median_iou={m['median_iou']:.3f} success={m['success']:.3f} median_s={m['median_s']:.1f}")
+    print(f"holes group (a hole of at least {HOLE_SHARE:.1%} of the frame): {len(holes)} targets")
+    for r in holes:
+        print(f"  {r['name']:22s} {r['iou']:6.3f} {'yes' if r['success'] else 'no'}")
+    share = lambda rs, key: sum(bool(r[key]) for r in rs) / len(rs) if rs else float("nan")  # noqa: E731
+    penetrating = [r for r in rows if float(r.get("penetration_mm") or 0.0) > PENETRATION_TOLERANCE_MM]
+    print(
+        f"SUMMARY n={m['n']} median_iou={m['median_iou']:.3f} success={m['success']:.3f} "
+        f"shadow_success={share(rows, 'shadow_success'):.3f} performable_success={share(rows, 'success'):.3f} "
+        f"penetrating_share={len(penetrating) / max(len(rows), 1):.2f} median_s={m['median_s']:.1f} "
+        f"holes_n={len(holes)} holes_success={share(holes, 'success'):.3f}"
+    )
     sys.stdout.flush()
+
+
+def largest_hole_share(path: Path) -> float:
+    """The largest hole of a written target frame (a background region that does not reach
+    the frame's edge) as a share of the frame's area; 0 without holes."""
+    shape = iio.imread(path)
+    shape = (shape if shape.ndim == 2 else shape[..., :3].mean(-1)) > 127
+    labels, n = ndimage.label(~shape)
+    if n == 0:
+        return 0.0
+    edge = set(np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])))
+    sizes = np.bincount(labels.ravel(), minlength=n + 1)
+    inner = [sizes[k] for k in range(1, n + 1) if k not in edge]
+    return max(inner, default=0) / shape.size
 
 
 def print_row(row: dict) -> None:
@@ -95,7 +139,13 @@ def print_row(row: dict) -> None:
     table = " ".join(f"{row[k]:6.3f}" if k != "thin_recall" else f"{row[k]:6.2f}" for k in TABLE)
     extra = " ".join(f"{k}={v}" for k, v in row.items() if k not in NOT_MEASURES and k not in TABLE and v != "")
     ok = "yes" if row["success"] else "no"
-    print(f"{row['name']:24s} {table} {ok:>3s} {row['seconds']:6.1f} {extra}".rstrip(), flush=True)
+    pen = f"{float(row.get('penetration_mm') or 0.0):5.1f}"
+    perf = "yes" if row.get("performable") else "no"
+    shadow = "yes" if row.get("shadow_success") else "no"
+    print(
+        f"{row['name']:24s} {table} {pen} {perf:>4s} {shadow:>6s} {ok:>3s} {row['seconds']:6.1f} {extra}".rstrip(),
+        flush=True,
+    )
 
 
 def _sheet_row(folder: Path, success: bool, tile: int = 128) -> np.ndarray:
