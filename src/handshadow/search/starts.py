@@ -295,7 +295,7 @@ def choose_starts(
     if not point:
         scale = torch.ones_like(scale)
     moved = apply_similarity(cand.to("cpu"), angle, scale, shift, scene, ALIGN_FRAME_PX).to(problem.device)
-    overlap = iou(problem.shadows(moved, ALIGN_FRAME_PX).cpu(), target)
+    overlap = problem.views_iou(moved, ALIGN_FRAME_PX)  # every view's (weighted), aligned to view 0
     order = torch.argsort(overlap, descending=True).tolist()
     picked = list(range(cand.batch - given.batch, cand.batch)) if given is not None else []  # aligned
     per_pose: dict[str, int] = {}
