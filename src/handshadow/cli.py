@@ -112,7 +112,7 @@ def check_views(args: argparse.Namespace) -> None:
 
     n = len(args.target)
     if n > MAX_TARGETS:
-        raise HandshadowError(f"give one target, or two for two views of one pose (FRONT SIDE); got {n}")
+        raise HandshadowError(f"give one target, or two targets for two views of one pose (FRONT SIDE); got {n}")
     if n == 1 and (args.view_angle is not None or args.view_weights is not None):
         option = "--view-angle" if args.view_angle is not None else "--view-weights"
         raise HandshadowError(f"{option} needs a second target: handshadow fit FRONT SIDE {option} ...")

@@ -171,14 +171,30 @@ def _place(centre: tuple[float, float]) -> str:
     return "the " + (f"{row} {col}".strip() or "middle")
 
 
+PARTS_NAMED = 3  # the largest this many places of missing parts (and of extra shadow) are named
+
+
+def _by_place(parts: Sequence[Part], thin_words: bool) -> list[str]:
+    """Parts grouped by where they are (shares summed, largest first), as words."""
+    places: dict[str, list[Part]] = {}
+    for p in parts:
+        places.setdefault(_place(p.centre), []).append(p)
+    ranked = sorted(places.items(), key=lambda item: -sum(p.share for p in item[1]))
+    out = []
+    for place, found in ranked[:PARTS_NAMED]:
+        kind = ("thin parts" if len(found) > 1 else "a thin part") if all(p.thin for p in found) else "a part"
+        out.append(f"{kind + ' at ' if thin_words else ''}{place} ({sum(p.share for p in found):.0%})")
+    return out
+
+
 def parts_text(missing: Sequence[Part], extra: Sequence[Part]) -> str:
-    """Which target parts a shadow misses and where it spills, in words."""
+    """Which target parts a shadow misses and where it spills (shares of the target's area),
+    in words."""
     said = []
     if missing:
-        named = [f"{'a thin part' if p.thin else 'a part'} at {_place(p.centre)} ({p.share:.0%})" for p in missing]
-        said.append("missing " + ", ".join(named))
+        said.append("missing " + ", ".join(_by_place(missing, True)))
     if extra:
-        said.append("extra shadow at " + ", ".join(f"{_place(p.centre)} ({p.share:.0%})" for p in extra))
+        said.append("extra shadow at " + ", ".join(_by_place(extra, False)))
     return "; ".join(said) if said else "nothing missing"
 
 
@@ -204,6 +220,9 @@ def view_lines(scores: Sequence[FitScore], parts: Sequence[tuple[list[Part], lis
     return lines
 
 
+GUIDE_TILE_PX = 360  # each view's shadow over its target, this many pixels wide
+
+
 def guide_views_image(
     view: np.ndarray, plan: np.ndarray, overlays: Sequence[np.ndarray], lines: list[str]
 ) -> np.ndarray:
@@ -213,7 +232,7 @@ def guide_views_image(
 
     h, w = view.shape[:2]
     width = w + plan.shape[1]
-    tile = min(h // 2, width // len(overlays) - 12)
+    tile = min(GUIDE_TILE_PX, width // len(overlays) - 12)
     canvas = Image.new("RGB", (width, h + tile + 30 + 18 * (len(lines) + 2)), "white")
     canvas.paste(Image.fromarray(view), (0, 0))
     canvas.paste(Image.fromarray(plan), (w, 0))

@@ -53,6 +53,8 @@ VIEW_AXIS_POINT_M = (0.0, 0.0, LAMP_TO_WALL_M / 2)
 VIEW_ANGLE_MIN_DEG = 45.0
 VIEW_ANGLE_MAX_DEG = 135.0
 TURN_DIGITS = 12  # a turned scene's coordinates are rounded to this many decimals (1e-12 m)
+UNIT_ROUNDS = 4  # normalisations that bring a direction's length to exactly 1.0
+
 
 
 class SceneError(HandshadowError):
@@ -132,15 +134,18 @@ class Scene:
         def vector(d):
             return _clean(rot @ np.asarray(d, float))
 
+        def direction(d):
+            return _unit(vector(d))
+
         light = (
             Light("point", position=point(self.light.position))
             if self.light.type == "point"
-            else Light("directional", direction=vector(self.light.direction))
+            else Light("directional", direction=direction(self.light.direction))
         )
         im = self.image
         return Scene(
             light=light,
-            wall=Wall(point=point(self.wall.point), normal=vector(self.wall.normal)),
+            wall=Wall(point=point(self.wall.point), normal=direction(self.wall.normal)),
             image=ImageFrame(im.width, im.height, point(im.origin), vector(im.u), vector(im.v)),
         )
 
@@ -254,6 +259,8 @@ class Scene:
             if np.linalg.norm(normal) == 0:
                 raise SceneError("wall.normal must not be zero")
             wall = Wall(point=_vec3(data["wall"]["point"], "wall.point"), normal=tuple(normal / np.linalg.norm(normal)))
+
+
             im = data["image"]
             width, height = int(im["width"]), int(im["height"])
             if width < 1 or height < 1 or width > 8192 or height > 8192:
@@ -327,6 +334,17 @@ def views_from_json(data) -> list[Scene]:
 def _clean(values: np.ndarray) -> tuple[float, float, float]:
     """Three coordinates with the rounding noise of a turn removed (1e-12 m), no -0.0."""
     return tuple(float(x) + 0.0 for x in np.round(values, TURN_DIGITS))
+
+
+def _unit(values) -> tuple[float, float, float]:
+    """A unit vector that reading scene.json (which normalises) leaves as it is."""
+    v = np.asarray(values, float)
+    for _ in range(UNIT_ROUNDS):
+        norm = float(np.linalg.norm(v))
+        if norm == 1.0:
+            break
+        v = v / norm
+    return tuple(float(x) + 0.0 for x in v)
 
 
 def _vec3(value, name: str) -> tuple[float, float, float]:

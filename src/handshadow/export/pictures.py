@@ -39,10 +39,25 @@ def scene_picture(
     meshes = [ViewMesh(v, f, color=HAND_COLORS.get(side, SKIN)) for side, v, f in hands]
     for view, mask in [(scene, shadow), *more_views]:
         meshes += _lit_wall(view, mask, rays_through)
-    camera = (
-        _beside_camera(scene, size) if not more_views else _corner_camera([scene, *(v for v, _ in more_views)], size)
-    )
-    return render_view(meshes, camera, background=(0.93, 0.94, 0.96))
+    if not more_views:
+        return render_view(meshes, _beside_camera(scene, size), background=(0.93, 0.94, 0.96))
+    views = [scene, *(v for v, _ in more_views)]
+    camera = _corner_camera(views, size)
+    return _label_walls(render_view(meshes, camera, background=(0.93, 0.94, 0.96)), views, camera)
+
+
+def _label_walls(picture: np.ndarray, views: list[Scene], camera: Camera) -> np.ndarray:
+    """'view K' written above each view's picture on its wall."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    canvas = Image.fromarray(picture)
+    draw = ImageDraw.Draw(canvas)
+    font = ImageFont.load_default()
+    for k, view in enumerate(views):
+        top = frame_centre(view) - 0.5 * np.asarray(view.image.v, float) * (1 + LABEL_ABOVE_SHARE)
+        xy, _ = camera.project(top[None])
+        draw.text((float(xy[0, 0]), float(xy[0, 1])), f"view {k}", fill=(40, 40, 40), font=font, anchor="mm")
+    return np.asarray(canvas)
 
 
 def _lit_wall(scene: Scene, shadow: np.ndarray, rays_through: np.ndarray | None) -> list[ViewMesh]:
@@ -72,8 +87,10 @@ def _beside_camera(scene: Scene, size: tuple[int, int]) -> Camera:
 
 # Seen from beyond the hands, opposite the walls, above: these shares of the mean lamp-to-wall
 # distance back and up, looking at the middle of the lamps and frames.
-CORNER_BACK = 1.3
-CORNER_UP = 0.6
+CORNER_BACK = 0.95
+CORNER_UP = 0.55
+CORNER_FOV_DEG = 48.0
+LABEL_ABOVE_SHARE = 0.12  # a wall's label sits this share of its picture's height above it
 
 
 def _corner_camera(views: list[Scene], size: tuple[int, int]) -> Camera:
@@ -87,7 +104,7 @@ def _corner_camera(views: list[Scene], size: tuple[int, int]) -> Camera:
     depth = float(np.mean([(lamp - c) @ np.asarray(v.wall.normal) for lamp, c, v in zip(lamps, centres, views)]))
     up = up_dir(views[0])
     eye = look_at + away * CORNER_BACK * depth + up * CORNER_UP * depth
-    return Camera(tuple(eye), tuple(look_at), tuple(up), fov_deg=50.0, width=size[0], height=size[1])
+    return Camera(tuple(eye), tuple(look_at), tuple(up), fov_deg=CORNER_FOV_DEG, width=size[0], height=size[1])
 
 
 def frame_centre(scene: Scene) -> np.ndarray:
@@ -178,6 +195,10 @@ PLAN_BEAM = (255, 236, 170)
 PLAN_WALL = (150, 150, 150)
 PLAN_FRAME = (40, 40, 40)
 PLAN_HANDS = tuple(int(255 * c) for c in SKIN)
+PLAN_LABEL_M = 0.12  # a wall's label sits this far behind it
+PLAN_LAMP_PX = 9
+PLAN_PERSON_PX = 12
+PLAN_SCALE_M = 0.5
 
 
 def plan_picture(views: Sequence[Scene], hand_vertices: np.ndarray, size: int = 560) -> np.ndarray:
@@ -186,51 +207,73 @@ def plan_picture(views: Sequence[Scene], hand_vertices: np.ndarray, size: int = 
     and a 50 cm scale. Up in the map is toward view 0's wall, right is the performer's right.
 
     Args:
-        views: the scenes, view 0 first (point lights; a directional light's lamp is drawn
-            where scene_trimesh puts its marker).
+        views: the scenes, view 0 first (a directional light's lamp is drawn where
+            scene_trimesh puts its marker).
         hand_vertices: (V, 3) world points of the hands.
     Returns (size, size, 3) uint8.
     """
-    from PIL import Image, ImageDraw, ImageFont
+    from PIL import Image, ImageDraw
 
     pts = np.asarray(hand_vertices, float)
-    hands_centre = pts.mean(0)
     away = np.sum([np.asarray(v.wall.normal, float) for v in views], axis=0)
-    performer = hands_centre + PLAN_PERFORMER_M * away / max(float(np.linalg.norm(away)), 1e-9)
-    ends = [_frame_ends(v, PLAN_WALL_EXTRA_M) for v in views]
+    performer = pts.mean(0) + PLAN_PERFORMER_M * away / max(float(np.linalg.norm(away)), 1e-9)
     lamps = [light_marker_position(v) for v in views]
-    box = np.concatenate([np.concatenate(ends), np.stack(lamps), pts, performer[None]])[:, [0, 2]]
+    walls = [_frame_ends(v, PLAN_WALL_EXTRA_M) for v in views]
+    box = np.concatenate([np.concatenate(walls), np.stack(lamps), pts, performer[None]])[:, [0, 2]]
     lo, hi = box.min(0) - PLAN_MARGIN_M, box.max(0) + PLAN_MARGIN_M
     scale = size / float((hi - lo).max())
+    offset = (np.array([size, size]) - (hi - lo) * scale) / 2  # centred
 
-    def at(p) -> tuple[float, float]:  # world (x, y, z) -> map pixel: x right, -z up
-        return ((p[0] - lo[0]) * scale, (hi[1] - p[2]) * scale)
+    def at(p) -> tuple[float, float]:  # world (x, y, z) -> map pixel: x to the right, -z up (from above)
+        return (float((p[0] - lo[0]) * scale + offset[0]), float((p[2] - lo[1]) * scale + offset[1]))
 
     canvas = Image.new("RGB", (size, size), "white")
     draw = ImageDraw.Draw(canvas)
-    font = ImageFont.load_default()
     for view, lamp in zip(views, lamps):
         a, b = _frame_ends(view, 0.0)
         draw.polygon([at(lamp), at(a), at(b)], fill=PLAN_BEAM)
-    for k, (view, lamp, (wa, wb)) in enumerate(zip(views, lamps, ends)):
+    draw.polygon([at(p) for p in _outline_from_above(pts)], fill=PLAN_HANDS, outline=(150, 100, 80))
+    _plan_labels(draw, views, lamps, walls, at, at(performer), scale, size)
+    return np.asarray(canvas)
+
+
+def _outline_from_above(points: np.ndarray) -> np.ndarray:
+    """(N, 3) the convex outline of points (V, 3) seen from above (their x-z hull, at y 0)."""
+    from scipy.spatial import ConvexHull
+
+    xz = points[:, [0, 2]]
+    hull = xz[ConvexHull(xz).vertices]
+    return np.stack([hull[:, 0], np.zeros(len(hull)), hull[:, 1]], 1)
+
+
+def _plan_labels(draw, views, lamps, walls, at, performer_px, scale: float, size: int) -> None:
+    """The plan's walls, frames, lamps, the performer and the scale, labelled."""
+    from PIL import ImageFont
+
+    font = ImageFont.load_default()
+    for k, (view, lamp, (wa, wb)) in enumerate(zip(views, lamps, walls)):
         a, b = _frame_ends(view, 0.0)
         draw.line([at(wa), at(wb)], fill=PLAN_WALL, width=3)
         draw.line([at(a), at(b)], fill=PLAN_FRAME, width=5)
-        mid = at(0.5 * (a + b) - 0.12 * np.asarray(view.wall.normal))
-        draw.text(mid, f"wall {k}", fill=PLAN_FRAME, font=font, anchor="mm")
+        draw.text(
+            at(0.5 * (a + b) - PLAN_LABEL_M * np.asarray(view.wall.normal)),
+            f"wall {k}",
+            fill=PLAN_FRAME,
+            font=font,
+            anchor="mm",
+        )
         x, y = at(lamp)
-        draw.ellipse([x - 9, y - 9, x + 9, y + 9], fill=tuple(int(255 * c) for c in LAMP), outline=(0, 0, 0))
-        draw.text((x, y + 18), f"lamp {k}", fill=(0, 0, 0), font=font, anchor="mm")
-    for x, y in (at(p) for p in pts[:: max(1, len(pts) // 2000)]):
-        draw.point((x, y), fill=PLAN_HANDS)
-    x, y = at(performer)
-    draw.ellipse([x - 12, y - 12, x + 12, y + 12], outline=(90, 90, 90), width=2)
-    draw.text((x, y + 22), "you", fill=(90, 90, 90), font=font, anchor="mm")
-    bar = 0.5 * scale
+        r = PLAN_LAMP_PX
+        draw.ellipse([x - r, y - r, x + r, y + r], fill=tuple(int(255 * c) for c in LAMP), outline=(0, 0, 0))
+        draw.text((x, y + 2 * r), f"lamp {k}", fill=(0, 0, 0), font=font, anchor="mm")
+    x, y = performer_px
+    r = PLAN_PERSON_PX
+    draw.ellipse([x - r, y - r, x + r, y + r], outline=(90, 90, 90), width=2)
+    draw.text((x, y + 2 * r), "you", fill=(90, 90, 90), font=font, anchor="mm")
+    bar = PLAN_SCALE_M * scale
     draw.line([(12, size - 14), (12 + bar, size - 14)], fill=(0, 0, 0), width=2)
-    draw.text((12 + bar / 2, size - 26), "50 cm", fill=(0, 0, 0), font=font, anchor="mm")
+    draw.text((12 + bar / 2, size - 26), f"{PLAN_SCALE_M * 100:.0f} cm", fill=(0, 0, 0), font=font, anchor="mm")
     draw.text((8, 6), "The set-up from above", fill=(40, 40, 40), font=font)
-    return np.asarray(canvas)
 
 
 def _frame_ends(scene: Scene, extra_m: float) -> tuple[np.ndarray, np.ndarray]:
