@@ -171,3 +171,66 @@ def test_a_missing_second_target_is_refused_by_the_python_api_too(tmp_path):
     with pytest.raises(HandshadowError, match="between 45 and 135"):
         fit_to_folder(["dog", "rabbit"], tmp_path / "o", FitConfig(size=32, view_angle_deg=10.0))
     assert not (tmp_path / "o").exists()
+
+
+SIZE = 128
+
+
+@pytest.fixture(scope="module")
+def two_view_fit(tmp_path_factory):
+    """The library's rabbit, opened so that no finger passes into the palm, rendered in two
+    views at 90 degrees (a pose known to be findable: the library's own rabbit is among the
+    starts, and its forearm leads back from both walls), fitted from the two images."""
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.library import load_library_pose
+    from handshadow.pipeline import fit_to_folder
+    from handshadow.poses import HandPoseBatch, PoseBatch
+    from handshadow.search import ViewTarget, separate
+
+    folder = tmp_path_factory.mktemp("fit_views")
+    truth = load_library_pose("rabbit")
+    front, side = default_views(SIZE, SIZE, "point", (0.0, 90.0))
+    config = FitConfig(hands="1", size=SIZE, quality="fast", seed=0)
+    blank = np.zeros((SIZE, SIZE), bool)
+    problem = make_problem(blank, front, ["right"], config, None, [ViewTarget(side, blank)])
+    pose = separate(problem, PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands]))
+    targets = [m[0] for m in problem.view_masks(pose)]
+    for k, t in enumerate(targets):
+        iio.imwrite(folder / f"view{k}.png", np.where(t, 0, 255).astype(np.uint8))
+    out, result, lines = fit_to_folder(
+        [str(folder / "view0.png"), str(folder / "view1.png")], folder / "out", config, show_progress=False
+    )
+    return out, result, targets, lines
+
+
+def test_a_pose_rendered_in_two_views_comes_back_in_both(two_view_fit):
+    out, result, targets, _ = two_view_fit
+    for k, target in enumerate(targets):
+        shadow = iio.imread(out / f"shadow_{k}.png") < 128
+        inter, union = (shadow & target).sum(), (shadow | target).sum()
+        assert inter / union >= 0.95, (k, inter / union)
+        assert np.array_equal(iio.imread(out / f"target_{k}.png") < 128, target)
+    assert result.success and result.performable
+    assert all(result.posed.fit["forearms_lead_back"])
+
+
+def test_a_two_view_fit_folder_has_every_view(two_view_fit, tmp_path):
+    out, result, _, lines = two_view_fit
+    names = {p.name for p in out.iterdir()}
+    per_view = {f"{stem}_{k}.png" for stem in ("target", "shadow", "overlay") for k in range(2)}
+    assert per_view | {"scene.json", "pose.json", "right.obj", "hands.glb", "scene.png", "guide.png"} <= names
+    assert not {"target.png", "shadow.png", "overlay.png"} & names
+    fit = json.loads((out / "pose.json").read_text())["fit"]
+    assert len(fit["views"]) == 2 and fit["view_angle_deg"] == 90.0
+    assert {"iou", "hd95", "thin_recall", "shadow_success", "weight", "missing", "extra"} <= set(fit["views"][1])
+    assert any(line.startswith("View 1: the lamp") for line in lines)  # where the second lamp goes
+    assert any(line.startswith("View 1: IoU") for line in lines)  # how its shadow came out
+    glb = trimesh.load(out / "hands.glb")
+    assert {"wall", "wall_1", "light", "light_1"} <= set(glb.geometry)
+    # The fit's every shadow from scene.json and the written meshes alone, and from the pose file.
+    views = json.loads((out / "scene.json").read_text())
+    assert main(["render", str(out / "pose.json"), "--out", str(tmp_path / "again")]) == 0
+    for k, view in enumerate(views):
+        shadow = iio.imread(out / f"shadow_{k}.png") < 128
+        assert (recompute_shadow(out, view) != shadow).sum() <= 2, k
+        assert (tmp_path / "again" / f"shadow_{k}.png").read_bytes() == (out / f"shadow_{k}.png").read_bytes()

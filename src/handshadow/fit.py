@@ -52,6 +52,10 @@ POLISH_ROUNDS = {"fast": (1, 0), "default": (2, 4), "best": (3, 6)}
 # --hands auto prefers one hand unless two score better by more than this (rank-key blend).
 ONE_HAND_PREFERENCE = 0.02
 MAX_VIEWS = 2  # targets one pose may answer: today's lamp and wall, and one turned about the hands
+# With several views each shadow's outline is pulled by the other views too and settles more
+# slowly: a last exact stage at a small rate, at full resolution (height 2048 is cut to the size).
+VIEWS_SETTLE = Stage(height=2048, blur_px=0, attract_px=2, steps=0, keep=1, lr_scale=0.1, skeleton=0.0)
+VIEWS_SETTLE_STEPS = {"fast": 60, "default": 80, "best": 100}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -160,8 +164,9 @@ class HandCountFit:
         return failed, blend - (ONE_HAND_PREFERENCE if self.n_hands == 1 else 0.0)
 
 
-def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list[Stage]]:
-    """(random starts, kept starts, stages) for a quality, scaled to a total step budget."""
+def schedule(quality: str, iters: int | None, size: int, views: int = 1) -> tuple[int, int, list[Stage]]:
+    """(random starts, kept starts, stages) for a quality, scaled to a total step budget; with
+    several views a last exact stage (VIEWS_SETTLE) settles the pose in all of them."""
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
     s = Stage
@@ -196,6 +201,8 @@ def schedule(quality: str, iters: int | None, size: int) -> tuple[int, int, list
             ],
         ),
     }[quality]
+    if views > 1:
+        stages = [*stages, dataclasses.replace(VIEWS_SETTLE, steps=VIEWS_SETTLE_STEPS[quality])]
     stages = [dataclasses.replace(st, height=min(st.height, size)) for st in stages]
     if iters is not None:
         total = sum(st.steps for st in stages)
@@ -416,7 +423,8 @@ def _search(targets, scenes, n_hands, config, progress, deadline, extra_starts=N
     weights = config.view_weights or (1.0,) * len(targets)
     more = [ViewTarget(s, t, w / weights[0]) for s, t, w in zip(scenes[1:], targets[1:], weights[1:])]
     problem = make_problem(targets[0], scenes[0], sides, config, anchor, more)
-    n_random, n_keep, stages = schedule(config.quality, config.iters, targets[0].shape[0])
+    n_random, n_keep, stages = schedule(config.quality, config.iters, targets[0].shape[0], len(targets))
+
     rng = np.random.default_rng(config.seed)
     starts = choose_starts(problem, sides, n_random, n_keep, rng, extra_starts, config.exclude_library)
     res = run_stages(problem, starts, stages, progress=progress, deadline_s=deadline, stop=stop)

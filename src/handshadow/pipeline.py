@@ -159,7 +159,8 @@ def fit_to_folder(
     sources = [target_source] if isinstance(target_source, str) else list(target_source)
     frames = [resolve_target(source, config.size, config.size, invert) for source in sources]
     view_scenes(frames, config)  # bad view options fail here, before the work
-    _, _, stages = schedule(config.quality, config.iters, config.size)
+    _, _, stages = schedule(config.quality, config.iters, config.size, len(frames))
+
     searches = 2 if config.hands == "auto" else 1  # fit_frame runs one search per hand count
     total = sum(s.steps for s in stages) * searches
     recorder = FrameRecorder(total, searches)

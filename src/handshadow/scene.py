@@ -56,7 +56,6 @@ TURN_DIGITS = 12  # a turned scene's coordinates are rounded to this many decima
 UNIT_ROUNDS = 4  # normalisations that bring a direction's length to exactly 1.0
 
 
-
 class SceneError(HandshadowError):
     """A scene description that cannot be used."""
 
@@ -259,7 +258,6 @@ class Scene:
             if np.linalg.norm(normal) == 0:
                 raise SceneError("wall.normal must not be zero")
             wall = Wall(point=_vec3(data["wall"]["point"], "wall.point"), normal=tuple(normal / np.linalg.norm(normal)))
-
 
             im = data["image"]
             width, height = int(im["width"]), int(im["height"])

@@ -274,7 +274,10 @@ def choose_starts(
     random hands, each aligned to the target in 2D, the best ``n_keep`` by IoU (at most
     PER_LIBRARY_POSE from any one library pose, so the starts stay diverse). ``given`` starts
     (one PoseBatch, e.g. a morph's other end) are always kept, both as given and aligned.
+    With several views each candidate is aligned to each view's target in turn and judged by
+    the views' IoUs together (weighted).
     problem: a search.problem.Problem; returns a PoseBatch on its device, with origins."""
+
     parts = [
         library_starts(len(sides), sides, exclude=exclude),
         random_starts(n_random, sides, problem.limits, rng),
@@ -282,20 +285,9 @@ def choose_starts(
     if given is not None:
         parts.append(given.detach().to("cpu").with_origins([Origin("given")] * given.batch))
     cand = PoseBatch.cat(parts).to(problem.device)
-    scene = problem.scene
-    point = scene.light.type == "point"
-    target = problem.level(ALIGN_FRAME_PX).maps.target.cpu()
-    angle, scale, shift, _ = similarity_align(
-        problem.shadows(cand, ALIGN_FRAME_PX).cpu(),
-        target,
-        pivot_pixel(scene, ALIGN_FRAME_PX),
-        ALIGN_ANGLES_DEG,
-        ALIGN_SCALES if point else np.array([1.0]),
-    )
-    if not point:
-        scale = torch.ones_like(scale)
-    moved = apply_similarity(cand.to("cpu"), angle, scale, shift, scene, ALIGN_FRAME_PX).to(problem.device)
-    overlap = problem.views_iou(moved, ALIGN_FRAME_PX)  # every view's (weighted), aligned to view 0
+    # Aligned to each view in turn (view 0's first), judged in every view (weighted).
+    moved = PoseBatch.cat([align_to_view(problem, cand, k) for k in range(len(problem.views))])
+    overlap = problem.views_iou(moved, ALIGN_FRAME_PX)
     order = torch.argsort(overlap, descending=True).tolist()
     picked = list(range(cand.batch - given.batch, cand.batch)) if given is not None else []  # aligned
     per_pose: dict[str, int] = {}
@@ -313,3 +305,21 @@ def choose_starts(
     log.info("starts: %s", ", ".join(f"{moved.origins[i]} {float(overlap[i]):.2f}" for i in picked[:8]))
     chosen = moved.select(picked)
     return PoseBatch.cat([cand.select(slice(cand.batch - given.batch, None)), chosen]) if given is not None else chosen
+
+
+def align_to_view(problem, cand: PoseBatch, view: int = 0) -> PoseBatch:
+    """Candidates (a PoseBatch on the problem's device) moved so that their shadows in one of
+    the problem's views best match its target in 2D (similarity_align, apply_similarity)."""
+    scene = problem.views[view].scene
+    point = scene.light.type == "point"
+    target = problem.level(ALIGN_FRAME_PX, view).maps.target.cpu()
+    angle, scale, shift, _ = similarity_align(
+        problem.shadows(cand, ALIGN_FRAME_PX, view).cpu(),
+        target,
+        pivot_pixel(scene, ALIGN_FRAME_PX),
+        ALIGN_ANGLES_DEG,
+        ALIGN_SCALES if point else np.array([1.0]),
+    )
+    if not point:
+        scale = torch.ones_like(scale)
+    return apply_similarity(cand.to("cpu"), angle, scale, shift, scene, ALIGN_FRAME_PX).to(problem.device)
