@@ -30,10 +30,13 @@ NEAR_MISS_HD95 = 0.01  # how far past the HD95 bar a result still counts as a ne
 RANK_THIN = 0.5
 RANK_HD95 = 4.0
 # Parts of a target a shadow misses (or shadow it adds), as a person would name them: slivers
-# along the outline narrower than PART_SLIVER_SHARE of the frame height are not parts, nor
-# pieces smaller than PART_MIN_SHARE of the target's area.
-PART_SLIVER_SHARE = 0.015
+# along the outline are not parts (a part reaches PART_MIN_DEPTH_PX, or PART_DEPTH_SHARE of the
+# frame height when that is more, from its edge: at least 3 px across), nor are pieces smaller
+# than PART_MIN_SHARE of the target's area.
+PART_MIN_DEPTH_PX = 2.0
+PART_DEPTH_SHARE = 0.008
 PART_MIN_SHARE = 0.01
+
 
 
 @dataclasses.dataclass(frozen=True)
@@ -196,21 +199,24 @@ def uncovered_parts(
 ) -> list[Part]:
     """The pieces of ``shape`` (H, W) bool that ``cover`` (H, W) bool leaves bare, largest
     first: target parts a shadow misses (shape = target, cover = shadow) or extra shadow
-    (shape = shadow, cover = target). Slivers and crumbs are left out (PART_SLIVER_SHARE,
-    PART_MIN_SHARE); shares are of the target's area; thin: the target's thin parts."""
+    (shape = shadow, cover = target). Slivers and crumbs are left out (PART_MIN_DEPTH_PX,
+    PART_DEPTH_SHARE, PART_MIN_SHARE); shares are of the target's area; thin: the target's
+    thin parts."""
     shape, cover, target = (np.asarray(a, bool) for a in (shape, cover, target))
     h, w = shape.shape
     thin = thin_parts(target) if thin is None else thin
-    radius = max(1, int(round(PART_SLIVER_SHARE * h)))
-    bare = opening(shape & ~cover, disk(radius)).astype(bool)
+    bare = shape & ~cover
+    depth = ndimage.distance_transform_edt(bare)
     labels, n = ndimage.label(bare)
     area = max(int(target.sum()), 1)
+    min_depth = max(PART_MIN_DEPTH_PX, PART_DEPTH_SHARE * h)
     parts = []
     for k in range(1, n + 1):
         piece = labels == k
         size = int(piece.sum())
-        if size < PART_MIN_SHARE * area:
+        if size < PART_MIN_SHARE * area or depth[piece].max() < min_depth:
             continue
+
         ys, xs = np.nonzero(piece)
         on_thin = int((piece & thin).sum())
         parts.append(Part(size / area, ((xs.mean() + 0.5) / w, (ys.mean() + 0.5) / h), on_thin >= 0.5 * size))
