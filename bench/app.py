@@ -1,10 +1,10 @@
 """Web-app benchmark: click-to-result time of a fit in a real browser.
 
-    python bench/app.py [--runs 3] [--quality fast] [--example bird]
+    python bench/app.py [--runs 3] [--quality fast] [--size 256] [--example bird]
 
 Starts `handshadow app` on 127.0.0.1, drives Debian's Chromium with Playwright, picks a built-in
-example with the page's defaults (hands: auto), presses Fit and waits for the downloadable
-result. Prints each run and a last line app_click_to_result_s=<median>.
+example with the page's defaults (hands: auto; quality and detail as asked), presses Fit and
+waits for the downloadable result. Prints each run and a last line app_click_to_result_s=<median>.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--quality", default="fast")
+    parser.add_argument("--size", default="256", choices=["64", "128", "256"], help="the page's Detail option")
     parser.add_argument("--example", default="bird")
     args = parser.parse_args()
     with socket.socket() as s:
@@ -65,9 +66,10 @@ def main() -> None:
                 page.wait_for_selector("#fit")
                 page.locator("#example input").fill(args.example)
                 page.keyboard.press("Enter")
-                if args.quality != "fast":
+                if args.quality != "fast" or args.size != "256":
                     page.get_by_text("Options").click()
-                    page.get_by_label(args.quality, exact=True).check()
+                    page.locator("#quality").get_by_label(args.quality, exact=True).check()
+                    page.locator("#size").get_by_label(args.size, exact=True).check()
                 t0 = time.perf_counter()
                 page.click("#fit")
                 page.wait_for_selector("#zip a[href]", timeout=600_000)

@@ -1,10 +1,19 @@
-"""Target images of every kind become the same binary frame; bad ones are refused clearly."""
+"""Target images of every kind become the same binary frame; photos of shadows read as their
+shape; clean masks read exactly as before the photo path existed; bad ones are refused clearly."""
+
+import hashlib
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
+from PIL import Image
 
-from handshadow.target import TargetError, load_target
+from handshadow import photos
+from handshadow.examples import TARGETS
+from handshadow.target import TargetError, letterbox, load_target, read_image, read_shape, read_target
+
+SHARED_HSP = Path(__file__).resolve().parents[2] / "shared" / "targets" / "hsp"
 
 
 def _shape(h=120, w=90):
@@ -38,6 +47,12 @@ def _reference(shape, size=64):
         "jpeg.jpg",
         "sixteen.png",
         "antialiased.png",
+        "cmyk.jpg",
+        "palette.png",
+        "palette-transparent.png",
+        "animated.gif",
+        "palette-light-on-dark.gif",
+        "exif-rotated.jpg",
     ],
 )
 def test_every_kind_of_image_gives_the_same_frame(tmp_path, shape, kind):
@@ -67,6 +82,28 @@ def test_every_kind_of_image_gives_the_same_frame(tmp_path, shape, kind):
 
         big = _shape(480, 360)
         iio.imwrite(path, (255 - resize(big.astype(float), (120, 90), anti_aliasing=True) * 255).astype(np.uint8))
+    elif kind == "cmyk.jpg":  # print files: four ink channels, which a plain RGBA reading mistakes for alpha
+        Image.fromarray(np.where(shape[..., None], black, white).repeat(3, 2)).convert("CMYK").save(path, quality=95)
+    elif kind == "palette.png":
+        rgb = np.where(shape[..., None], np.array([20, 30, 90], np.uint8), np.array([250, 240, 200], np.uint8))
+        Image.fromarray(rgb).convert("P", palette=Image.Palette.ADAPTIVE, colors=4).save(path)
+    elif kind == "palette-transparent.png":  # a palette with a transparent ground index: the shape is in alpha
+        im = Image.fromarray(np.where(shape, 1, 0).astype(np.uint8), mode="P")
+        im.putpalette([200, 200, 200, 200, 200, 200])  # both entries the same colour: only alpha tells
+        im.save(path, transparency=0)
+    elif kind == "animated.gif":  # the first frame counts
+        frames = [np.where(shape, 0, 255), np.where(np.roll(shape, 30, 1), 0, 255), np.full(shape.shape, 128)]
+        iio.imwrite(path, np.stack(frames).astype(np.uint8), duration=200, loop=0)
+    elif kind == "palette-light-on-dark.gif":  # MPEG-7 style: white on black, GIF87a palette, touching the top
+        touching = shape.copy()
+        touching[: int(0.1 * shape.shape[0]), int(0.48 * shape.shape[1]) : int(0.52 * shape.shape[1]) + 1] = True
+        shape = touching
+        Image.fromarray(np.where(shape, 255, 0).astype(np.uint8)).convert("P").save(path)
+    elif kind == "exif-rotated.jpg":  # a phone's portrait photo: stored sideways, with a rotation tag
+        sideways = Image.fromarray(np.where(np.rot90(shape, 1)[..., None], black, white).repeat(3, 2))
+        exif = Image.Exif()
+        exif[0x0112] = 6  # orientation: rotate 90 degrees clockwise to show
+        sideways.save(path, quality=95, exif=exif)
     frame = load_target(path, 64, 64)
     ref = _reference(shape)
     assert frame.shape == (64, 64) and frame.dtype == bool
@@ -93,13 +130,17 @@ def test_invert_overrides_the_border_rule(tmp_path, shape):
     assert (inverted ^ expected).sum() <= 0.03 * expected.sum()
 
 
-@pytest.mark.parametrize("case", ["missing", "text", "empty", "full", "one-pixel", "truncated"])
+@pytest.mark.parametrize("case", ["missing", "text", "empty", "noisy-empty", "full", "one-pixel", "truncated"])
 def test_bad_targets_are_refused(tmp_path, case):
     path = tmp_path / f"{case}.png"
     if case == "text":
         path.write_text("this is not an image\n")
     elif case == "empty":
         iio.imwrite(path, np.full((50, 50), 255, np.uint8))
+    elif case == "noisy-empty":  # a phone photo of a blank wall: sensor noise and JPEG, nothing else
+        noise = np.random.default_rng(0).normal(0, 4, (120, 160, 3))
+        path = tmp_path / "wall.jpg"
+        Image.fromarray(np.clip(236 + noise, 0, 255).astype(np.uint8)).save(path, quality=60)
     elif case == "full":
         img = np.zeros((50, 50), np.uint8)
         img[0, :] = img[-1, :] = img[:, 0] = img[:, -1] = 255  # a light frame around a dark fill
@@ -112,3 +153,135 @@ def test_bad_targets_are_refused(tmp_path, case):
     with pytest.raises(TargetError) as err:
         load_target(path, 64, 64)
     assert "\n" not in str(err.value)
+
+
+def test_a_cmyk_jpeg_reads_its_colours_not_its_black_ink_as_alpha(tmp_path):
+    rgba = np.zeros((40, 40, 3), np.uint8) + 255
+    rgba[10:30, 10:30] = 0
+    Image.fromarray(rgba).convert("CMYK").save(tmp_path / "c.jpg")
+    image = read_image(tmp_path / "c.jpg")
+    assert image[..., 3].min() == 1.0  # no alpha
+    assert image[20, 20, :3].max() < 0.1 and image[2, 2, :3].min() > 0.9
+
+
+# The reading of clean masks as it was before the photo path (main at 73c9e89), word for word:
+# the photo path must never change a clean mask's frame.
+def _legacy_frame(path, width, height):
+    rgba = read_image(path)
+    grey = rgba[..., :3] @ np.array([0.299, 0.587, 0.114])
+    border = np.concatenate([grey[0], grey[-1], grey[:, 0], grey[:, -1]])
+    cover = grey if np.median(border) < 0.5 else 1.0 - grey
+    lo, hi = np.percentile(cover, 1), np.percentile(cover, 99)
+    return letterbox(np.clip((cover - lo) / (hi - lo), 0.0, 1.0), width, height) >= 0.5
+
+
+CLEAN = [TARGETS / f"{name}.png" for name in ("bird", "deer", "rabbit", "snail")] + [
+    SHARED_HSP / f"{name}.png" for name in ("rabbit", "circle_pg", "spider", "K", "plant-3")
+]
+
+
+@pytest.mark.parametrize("path", CLEAN, ids=lambda p: f"{p.parent.name}/{p.stem}")
+def test_clean_masks_read_exactly_as_before(path):
+    if not path.exists():
+        pytest.skip(f"{path} is not here (the shared HSP set lives beside the repository)")
+    reading = read_shape(read_image(path))
+    assert not reading.photo and reading.warning is None
+    for width, height in [(256, 256), (128, 96)]:
+        target = read_target(path, width, height)
+        assert np.array_equal(target.frame, _legacy_frame(path, width, height))
+        assert target.warning is None
+
+
+def test_clean_mask_frames_are_pinned():
+    """Today's 256 x 256 frames of two built-in examples, to the pixel (SHA-1 of the packed bits)."""
+    pinned = {"bird": "1ad073eede80a819fa6c7a369e2eb78bf055d61d", "rabbit": "faab988838e4827279928cbc2210b1345c83d875"}
+    for name, digest in pinned.items():
+        frame = load_target(TARGETS / f"{name}.png")
+        assert hashlib.sha1(np.packbits(frame).tobytes()).hexdigest() == digest, name
+
+
+def _example_shape(name):
+    return read_shape(read_image(TARGETS / f"{name}.png")).coverage >= 0.5
+
+
+@pytest.mark.parametrize("effect", [*photos.EFFECTS, "all together"])
+@pytest.mark.parametrize("name", ["deer", "snail"])
+def test_photos_of_shadows_read_as_their_shape(name, effect):
+    effects = photos.ALL if effect == "all together" else photos.EFFECTS[effect]
+    photo, truth = photos.photo_of(_example_shape(name), effects, np.random.default_rng(7))
+    iou, reading = photos.read_back(photo, truth)
+    assert iou >= 0.95, f"{name} with {effect}: IoU {iou:.3f}"
+    if effect in ("uneven light", "all together"):
+        assert reading.photo  # the clean reading alone gives this up (the corners become shape)
+
+
+def test_a_photo_file_reads_through_the_same_path(tmp_path):
+    """A JPEG from a phone, rotated by its tag, tinted, lit unevenly: read from the file."""
+    photo, truth = photos.photo_of(_example_shape("wolf"), photos.ALL, np.random.default_rng(3))
+    exif = Image.Exif()
+    exif[0x0112] = 8  # stored turned a quarter clockwise; shown turned back
+    Image.fromarray(np.rot90(photo, -1)).save(tmp_path / "wall.jpg", quality=85, exif=exif)
+    frame = load_target(tmp_path / "wall.jpg", 128, 128)
+    expected = letterbox(truth.astype(float), 128, 128) >= 0.5
+    assert (frame & expected).sum() / (frame | expected).sum() >= 0.95
+
+
+def test_a_dim_photo_reads_too():
+    """An underexposed photo: the wall at a quarter of full scale, the shadow 45 % darker."""
+    dim = photos.PhotoEffects(exposure=0.25, darkness=0.45, noise=0.01, hot_spot=0.3, vignetting=0.3, jpeg_quality=70)
+    photo, truth = photos.photo_of(_example_shape("swan"), dim, np.random.default_rng(6))
+    assert photo.max() < 110
+    iou, _ = photos.read_back(photo, truth)
+    assert iou >= 0.95
+
+
+def test_a_light_shape_on_a_dark_uneven_ground_reads_too():
+    photo, truth = photos.photo_of(_example_shape("deer"), photos.ALL, np.random.default_rng(5))
+    iou, reading = photos.read_back(255 - photo, truth)  # chalk on a blackboard, say
+    assert iou >= 0.95 and reading.photo
+
+
+def test_the_camel_of_the_issue_reads_without_its_corners():
+    """Issue 19's photo: warm tint, hot spot, corners 50 % darker, 5 px penumbra, a shadow 70 %
+    darker than the wall, sensor noise, 600 x 600."""
+    effects = photos.PhotoEffects(tint=1.0, hot_spot=0.5, vignetting=0.5, darkness=0.7, blur_px=5, noise=0.03)
+    photo, truth = photos.photo_of(_example_shape("crocodile"), effects, np.random.default_rng(11))
+    assert photo.shape == (600, 600, 3)
+    iou, reading = photos.read_back(photo, truth)
+    assert iou >= 0.95
+    frame = letterbox(reading.coverage, 256, 256) >= 0.5
+    corners = frame[:20, :20].sum() + frame[:20, -20:].sum() + frame[-20:, :20].sum() + frame[-20:, -20:].sum()
+    assert corners == 0
+
+
+def test_an_unsure_reading_says_so_in_one_line(tmp_path):
+    faint = photos.PhotoEffects(hot_spot=0.5, vignetting=0.4, darkness=0.2, noise=0.02)
+    photo, _ = photos.photo_of(_example_shape("deer"), faint, np.random.default_rng(2))
+    iio.imwrite(tmp_path / "faint.png", photo)
+    target = read_target(tmp_path / "faint.png", 64, 64)
+    assert target.warning and "\n" not in target.warning and "check target.png" in target.warning
+
+
+def test_the_command_line_prints_the_warning_before_fitting(tmp_path, monkeypatch, capsys):
+    import handshadow.pipeline
+    from handshadow.cli import EXIT_INTERRUPTED, main
+
+    faint = photos.PhotoEffects(hot_spot=0.5, vignetting=0.4, darkness=0.2, noise=0.02)
+    photo, _ = photos.photo_of(_example_shape("deer"), faint, np.random.default_rng(2))
+    iio.imwrite(tmp_path / "faint.png", photo)
+
+    def no_fit(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(handshadow.pipeline, "fit_to_folder", no_fit)
+    assert main(["fit", str(tmp_path / "faint.png"), "--out", str(tmp_path / "out"), "--quiet"]) == EXIT_INTERRUPTED
+    err = capsys.readouterr().err
+    assert "handshadow: warning: " in err and "check target.png" in err
+
+
+def test_the_photo_generator_is_seeded():
+    shape = _example_shape("dog")
+    a = photos.photo_of(shape, photos.ALL, np.random.default_rng(4))
+    b = photos.photo_of(shape, photos.ALL, np.random.default_rng(4))
+    c = photos.photo_of(shape, photos.ALL, np.random.default_rng(5))
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) and not np.array_equal(a[0], c[0])

@@ -1,44 +1,69 @@
 """`handshadow app`: a local web page to make a hand shadow from an upload, a drawing or an
 example, watch the fit, turn the 3D hands around, and download everything.
 
+Three parts:
+
+- the work, free of Gradio: sessions (`SessionStore`), a `Job` (a worker thread, a queue of
+  progress snapshots, a cancel event), and the steps of a fit, a reading and a morph as plain
+  functions of plain values (`read_for_page`, `fit_steps`, `morph_steps`);
+- the page, `layout`: components only, no behaviour;
+- `build_app`: thin wiring from the page's events to the work.
+
 Offline and private: it binds to 127.0.0.1 unless told otherwise, Gradio's analytics and
-Hugging Face telemetry are switched off, fonts are Gradio's bundled ones, and every browser
-session works in its own temporary folder, deleted when the session ends and when the app
-stops. Gradio is imported only here.
+Hugging Face telemetry are switched off (in `launch`, before Gradio is imported), fonts are
+Gradio's bundled ones, and every browser session works in its own temporary folder, deleted
+when the session ends and when the app stops. Gradio is an optional extra
+(``pip install 'handshadow[app]'``), imported only here, only when the app starts.
+
+Uploads go to the same reading as the command line (`target.py`): the file itself, not a
+copy converted in the browser. The page shows the shape as it will be read as soon as a
+picture is chosen, and every error or warning stays in the status line in words.
 """
 
 import atexit
+import dataclasses
 import os
 import queue
+import re
 import shutil
 import tempfile
 import threading
 import time
 import uuid
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
-os.environ.setdefault("GRADIO_ANALYTICS_ENABLED", "False")
-os.environ.setdefault("HF_HUB_DISABLE_TELEMETRY", "1")
-os.environ.setdefault("HF_HUB_OFFLINE", "1")
-os.environ.setdefault("GRADIO_DO_NOT_TRACK", "1")
+import numpy as np
 
-import numpy as np  # noqa: E402
+from handshadow.errors import HandshadowError
 
 MAX_UPLOAD = "8mb"
-MAX_PIXELS = 16_000_000
 QUALITY_HELP = "fast: about 20 s; default: about a minute; best: a few minutes (on a laptop CPU)"
+INSTALL_HINT = "the app needs Gradio, an optional extra: pip install 'handshadow[app]'"
+# Set before Gradio (and the Hugging Face hub it imports) reads them: no analytics, no telemetry, offline.
+OFFLINE_ENV = {
+    "GRADIO_ANALYTICS_ENABLED": "False",
+    "HF_HUB_DISABLE_TELEMETRY": "1",
+    "HF_HUB_OFFLINE": "1",
+    "GRADIO_DO_NOT_TRACK": "1",
+}
+PREVIEW_ROWS = 256  # height of the pictures of the target and the overlay, pixels (about)
+PREVIEW_EVERY_S = 0.7  # at most one live preview per this many seconds
+SIZES = ["64", "128", "256"]  # the frame's side: detail against time
+READY = "Pick a shape and press **Fit**."
+DRAW = "Draw a filled shape, then press **Fit**."
+CANCELLING = "Cancelling: keeping the best result so far..."
 
 
 class Session:
-    """One browser session's folder and its running job."""
+    """One browser session's folder and its cancel switch."""
 
     def __init__(self, root: Path):
         self.dir = Path(tempfile.mkdtemp(prefix="session-", dir=root))
         self.cancel = threading.Event()
 
     def new_job(self, kind: str) -> Path:
-        path = self.dir / f"{kind}-{uuid.uuid4().hex[:8]}"
-        return path
+        return self.dir / f"{kind}-{uuid.uuid4().hex[:8]}"
 
 
 class SessionStore:
@@ -50,15 +75,16 @@ class SessionStore:
         self._lock = threading.Lock()
         atexit.register(self.close)
 
-    def get(self, key: str) -> "Session":
+    def get(self, key: str | None) -> Session:
+        key = key or "local"
         with self._lock:
             if key not in self._sessions:
                 self._sessions[key] = Session(self.root)
             return self._sessions[key]
 
-    def drop(self, key: str) -> None:
+    def drop(self, key: str | None) -> None:
         with self._lock:
-            session = self._sessions.pop(key, None)
+            session = self._sessions.pop(key or "local", None)
         if session is not None:
             session.cancel.set()
             shutil.rmtree(session.dir, ignore_errors=True)
@@ -67,23 +93,74 @@ class SessionStore:
         shutil.rmtree(self.root, ignore_errors=True)
 
 
-def _save_target(image, folder: Path) -> Path:
-    """Write an uploaded or drawn image (numpy RGB/RGBA) as the job's target.png source."""
-    import imageio.v3 as iio
+class Job:
+    """Work in its own thread: ``work(report, stop)`` calls ``report(update)`` as it goes and
+    checks ``stop()`` (the cancel event) at every step. ``updates()`` yields what was
+    reported until the work ends; ``outcome()`` is its return value, or raises its error."""
 
-    if image is None:
-        raise ValueError("no target: upload an image, draw a shape or pick an example")
-    arr = np.asarray(image)
-    if arr.ndim < 2 or arr.size == 0:
-        raise ValueError("the target image is empty")
-    if arr.shape[0] * arr.shape[1] > MAX_PIXELS:
-        raise ValueError(
-            f"the image is too large ({arr.shape[1]} x {arr.shape[0]} pixels; at most {MAX_PIXELS // 1_000_000} megapixels)"
-        )
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / "input.png"
-    iio.imwrite(path, arr.astype(np.uint8) if arr.dtype != np.uint8 else arr)
-    return path
+    def __init__(self, work: Callable[[Callable, Callable[[], bool]], object], cancel: threading.Event):
+        self.cancel = cancel
+        self._work = work
+        self._queue: queue.Queue = queue.Queue()
+        self._result: object = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        try:
+            self._result = self._work(self._queue.put, self.cancel.is_set)
+        except Exception as exc:  # shown in the page
+            self._error = exc
+
+    def start(self) -> "Job":
+        self._thread.start()
+        return self
+
+    def updates(self, poll_s: float = 0.25) -> Iterator[object]:
+        while self._thread.is_alive() or not self._queue.empty():
+            try:
+                yield self._queue.get(timeout=poll_s)
+            except queue.Empty:
+                continue
+        self._thread.join()
+
+    def outcome(self) -> object:
+        if self._error is not None:
+            raise self._error
+        return self._result
+
+
+@dataclasses.dataclass(frozen=True)
+class FitOptions:
+    """What the page's options say: hands '1', '2' or 'auto'; the rest as FitConfig."""
+
+    hands: str = "auto"
+    quality: str = "fast"
+    limits: str = "anatomical"
+    light: str = "point"
+    size: int = 256
+    invert: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class FitUpdate:
+    """One step of a fit for the page: preview (H, W, 3) uint8 or a file path or None (keep),
+    status (Markdown), finished (the result's folder and zip once done, else None), and
+    fraction (0..1, for the progress bar; None when not fitting)."""
+
+    preview: object
+    status: str
+    finished: dict | None = None
+    fraction: float | None = None
+
+
+def in_words(exc: BaseException, *paths: str) -> str:
+    """A one-line message for the page: uploaded files named by their own names, not their
+    temporary paths, and the page's words for the command line's options."""
+    message = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
+    for path in paths:
+        message = message.replace(str(path), Path(path).name)
+    return message.replace("use --invert", "tick Invert (in Options)")
 
 
 def _drawing(editor_value):
@@ -102,323 +179,495 @@ def _drawing(editor_value):
     return arr if drawn.any() else None
 
 
+def target_source(source: str, upload: str | None, drawing, example: str | None, folder: Path) -> str:
+    """What the fit reads: the uploaded file itself, the drawing saved as a PNG, or an
+    example's name. Raises ValueError with a one-line message when nothing is chosen."""
+    if source == "Draw":
+        image = _drawing(drawing)
+        if image is None:
+            raise ValueError("the sketchpad is empty: draw a shape first")
+        import imageio.v3 as iio
+
+        folder.mkdir(parents=True, exist_ok=True)
+        iio.imwrite(folder / "drawing.png", np.asarray(image, np.uint8))
+        return str(folder / "drawing.png")
+    if source == "Upload":
+        if not upload:
+            raise ValueError("no picture yet: upload one (PNG, JPEG, GIF, BMP, WebP ...), or pick an example")
+        return str(upload)
+    if not example:
+        raise ValueError("pick an example")
+    return example
+
+
+def read_for_page(source: str | None, invert: bool = False, size: int = 256) -> tuple[np.ndarray | None, str]:
+    """(the shape as the fit will read it: target.png's size x size black on white frame; the
+    status line): the reading's warning, or its error in words, or that all is ready."""
+    from handshadow.examples import target_path
+    from handshadow.export.images import mask_image
+    from handshadow.target import read_target
+
+    if not source:
+        return None, READY
+    try:
+        target = read_target(target_path(source), size, size, invert or None)
+    except HandshadowError as exc:
+        return None, f"**Cannot use this picture:** {in_words(exc, source)}"
+    picture = enlarged(mask_image(target.frame))
+    if target.warning:
+        return picture, f"**Warning:** {target.warning} (below). Then press **Fit**."
+    return picture, "The shape as it will be read is below. Press **Fit**."
+
+
+def enlarged(image: np.ndarray, rows: int = PREVIEW_ROWS) -> np.ndarray:
+    """A small picture (H, W[, 3]) repeated by a whole factor to about ``rows`` rows, so a
+    64-pixel frame shows as large and as crisp as a 256-pixel one."""
+    k = max(1, rows // image.shape[0])
+    return np.repeat(np.repeat(image, k, axis=0), k, axis=1)
+
+
+def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[FitUpdate]:
+    """A fit for the page: a live preview while it searches, then the result's overlay, folder
+    and zip. Cancel (the session's event) keeps the best so far. Errors end it with their message."""
+    import imageio.v3 as iio
+
+    from handshadow.cli import performance_lines
+    from handshadow.examples import target_path
+    from handshadow.export.images import overlay_preview
+    from handshadow.fit import FitConfig
+    from handshadow.pipeline import fit_to_folder
+    from handshadow.target import read_target
+
+    session.cancel.clear()
+    folder = session.new_job("fit")
+    invert = options.invert or None
+    try:
+        target = read_target(target_path(source), options.size, options.size, invert)
+    except HandshadowError as exc:
+        yield FitUpdate(None, f"**Cannot use this picture:** {in_words(exc, source)}")
+        return
+    note = f"  \n**Warning:** {target.warning}" if target.warning else ""
+    config = FitConfig(
+        hands=options.hands,
+        quality=options.quality,
+        limits=options.limits,
+        light=options.light,
+        size=options.size,
+        device="auto",
+    )
+
+    def work(report, stop):
+        return fit_to_folder(
+            source, folder / "result", config, invert=invert, show_progress=False, progress_hook=report, stop=stop
+        )
+
+    job = Job(work, session.cancel).start()
+    yield FitUpdate(None, "Fitting..." + note, fraction=0.0)
+    last = 0.0
+    for p in job.updates():
+        fraction = min(1.0, p.done / max(p.total, 1))
+        if time.perf_counter() - last > PREVIEW_EVERY_S:
+            last = time.perf_counter()
+            preview = overlay_preview(target.frame, p.shadow, PREVIEW_ROWS)
+            state = CANCELLING if session.cancel.is_set() else f"Fitting... IoU {p.iou:.3f}"
+            yield FitUpdate(preview, state + note, fraction=fraction)
+    try:
+        result_folder, result, lines = job.outcome()
+    except Exception as exc:  # a fit's error, in words
+        yield FitUpdate(None, f"**The fit stopped:** {in_words(exc, source)}")
+        return
+    yield FitUpdate(None, "Making the model to 3D-print..." + note, fraction=1.0)
+    printed = printable(result_folder)
+    zip_path = shutil.make_archive(str(folder / "handshadow-result"), "zip", result_folder)
+    status = (
+        ("Cancelled: best result so far. " if result.interrupted else "")
+        + str(result.score)
+        + (" (a success)" if result.success else "")
+        + note
+        + f"  \n{printed}"
+        + "\n\n"
+        + "\n".join(line.strip() for line in [*performance_lines(result), *lines])
+    )
+    overlay = enlarged(iio.imread(result_folder / "overlay.png"))
+    yield FitUpdate(overlay, status, {"folder": str(result_folder), "zip": zip_path})
+
+
+def printable(result_folder: Path) -> str:
+    """Write print.stl (and print.3mf, print.json, print.png) into a result folder; one line
+    for the page on what the zip holds."""
+    from handshadow.export.printing import print_result
+
+    try:
+        report = print_result(result_folder)
+    except HandshadowError as exc:
+        return f"No model to 3D-print: {exc}"
+    return f"The zip holds print.stl, {report.height_mm:.0f} mm tall, with print.png telling where the torch goes."
+
+
+def result_files(finished: dict) -> tuple[str, ...]:
+    """The result's files for the page: shadow, 3D hands, guide, pose, zip, search GIF."""
+    folder = Path(finished["folder"])
+    names = ("shadow.png", "hands.glb", "guide.png", "pose.json")
+    return (*(str(folder / n) for n in names), finished["zip"], str(folder / "progress.gif"))
+
+
+def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size: int):
+    """A morph for the page: (video, GIF, path plot, zip, status). Errors: Nones and the
+    message in words."""
+    from handshadow.examples import target_path
+    from handshadow.fit import FitConfig
+    from handshadow.pipeline import interpolate_to_folder
+    from handshadow.target import read_target
+
+    folder = session.new_job("morph")
+    try:
+        targets = [read_target(target_path(source), 64, 64) for source in (a, b)]
+        config = FitConfig(hands=hands, quality="fast", size=size, device="auto")
+        result, report = interpolate_to_folder(a, b, folder / "result", config, frames=frames, show_progress=False)
+    except HandshadowError as exc:
+        return None, None, None, None, f"**Cannot morph:** {in_words(exc, a, b)}"
+    except Exception as exc:  # a fit's or the path's error, in words
+        return None, None, None, None, f"**The morph stopped:** {in_words(exc, a, b)}"
+    zip_path = shutil.make_archive(str(folder / "handshadow-morph"), "zip", result)
+    files = [str(result / n) for n in ("animation.mp4", "animation.gif", "path.png")]
+    warnings = [f"**Warning ({end}):** {t.warning}  \n" for end, t in zip(("first", "last"), targets) if t.warning]
+    return (*files, zip_path, "".join(warnings) + report.summary())
+
+
+# -- The page ------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class ShadowTab:
+    """The Shadow tab's components (Gradio objects)."""
+
+    source: object
+    example: object
+    upload: object
+    drawing: object
+    reading: object
+    hands: object
+    quality: object
+    limits: object
+    light: object
+    size: object
+    invert: object
+    fit: object
+    cancel: object
+    status: object
+    guide: object
+    preview: object
+    shadow: object
+    model: object
+    pose_file: object
+    zip_file: object
+    progress_gif: object
+    finished: object
+
+    def options(self) -> list:
+        return [self.hands, self.quality, self.limits, self.light, self.size, self.invert]
+
+    def results(self) -> list:
+        return [self.shadow, self.model, self.guide, self.pose_file, self.zip_file, self.progress_gif]
+
+
+@dataclasses.dataclass
+class MorphTab:
+    """The Morph tab's components: the two ends (source, example, upload each), the options,
+    the button and the outputs."""
+
+    ends: list
+    frames: object
+    hands: object
+    size: object
+    morph: object
+    status: object
+    video: object
+    gif: object
+    path_plot: object
+    zip_file: object
+
+
+def _sources(gr, label: str, choices: list[str], examples: list[str], value: str | None, prefix: str):
+    """(source radio, example dropdown, upload) for one shape to choose."""
+    source = gr.Radio(choices, value="Example", label=label, elem_id=f"{prefix}source")
+    example = gr.Dropdown(examples, value=value, label="Example", elem_id=f"{prefix}example")
+    upload = gr.Image(
+        label="Your picture: a shape on a plain ground, or a photo of a shadow on a wall",
+        type="filepath",
+        image_mode=None,  # the file itself goes to the reading, unconverted
+        sources=["upload", "clipboard"],
+        visible=False,
+        elem_id=f"{prefix}upload",
+    )
+    return source, example, upload
+
+
+def _fit_options(gr) -> dict:
+    """The Options accordion's components, by ShadowTab field."""
+    with gr.Accordion("Options", open=False):
+        return {
+            "hands": gr.Radio(["1", "2", "auto"], value="auto", label="Hands", elem_id="hands"),
+            "quality": gr.Radio(
+                ["fast", "default", "best"], value="fast", label="Quality", info=QUALITY_HELP, elem_id="quality"
+            ),
+            "size": gr.Radio(
+                SIZES,
+                value="256",
+                label="Detail (pixels)",
+                info="the target's frame: 64 is quick and coarse; 256 as the command line",
+                elem_id="size",
+            ),
+            "limits": gr.Radio(
+                ["anatomical", "paper"],
+                value="anatomical",
+                label="Joint limits",
+                info="anatomical: real ranges of motion; paper: Table 1 of the 2023 paper",
+            ),
+            "light": gr.Radio(
+                ["point", "directional"],
+                value="point",
+                label="Light",
+                info="point: a lamp 2 m from the wall; directional: sunlight",
+            ),
+            "invert": gr.Checkbox(value=False, label="Invert: the shape is lighter than its ground", elem_id="invert"),
+        }
+
+
+def _shape_column(gr, example_names: list[str]) -> dict:
+    """Left: the shape, the options, Fit and Cancel, the status line, the reading, the guide."""
+    c = {}
+    first = example_names[0] if example_names else None
+    c["source"], c["example"], c["upload"] = _sources(
+        gr, "Shape", ["Example", "Upload", "Draw"], example_names, first, ""
+    )
+    c["drawing"] = gr.Sketchpad(
+        label="Draw a filled shape (pick the brush first)",
+        type="numpy",
+        image_mode="RGBA",
+        brush=gr.Brush(default_size=28, colors=["#000000"], color_mode="fixed"),
+        canvas_size=(512, 512),
+        visible=False,
+        elem_id="sketchpad",
+    )
+    c.update(_fit_options(gr))
+    with gr.Row():
+        c["fit"] = gr.Button("Fit", variant="primary", elem_id="fit")
+        c["cancel"] = gr.Button("Cancel", elem_id="cancel")
+    c["status"] = gr.Markdown(READY, elem_id="status")
+    c["reading"] = gr.Image(
+        label="The shape as it will be read (target.png)",
+        type="numpy",
+        format="png",  # lossless: exactly what target.png will hold
+        elem_id="reading",
+        height=220,
+    )
+    c["guide"] = gr.Image(label="How to hold your hands", type="filepath", elem_id="guide")
+    return c
+
+
+def _result_column(gr) -> dict:
+    """Right: the live preview, the shadow, the 3D hands, the files."""
+    c = {}
+    with gr.Row():
+        c["preview"] = gr.Image(
+            label="Shadow over target: grey both, red extra, blue missing",
+            type="filepath",
+            format="png",
+            elem_id="preview",
+            height=300,
+        )
+        c["shadow"] = gr.Image(label="The shadow", type="filepath", elem_id="shadow", height=300)
+    c["model"] = gr.Model3D(
+        label="3D: drag to turn. Hands, lamp (yellow) and wall",
+        clear_color=(0.93, 0.94, 0.96, 1.0),
+        elem_id="model3d",
+        height=440,
+    )
+    with gr.Row():
+        c["pose_file"] = gr.File(label="pose.json", elem_id="pose")
+        c["zip_file"] = gr.File(label="Everything (zip)", elem_id="zip")
+    with gr.Accordion("The search, step by step", open=False):
+        c["progress_gif"] = gr.Image(label="progress.gif", type="filepath", elem_id="progress")
+    return c
+
+
+def _morph_tab(gr, example_names: list[str]) -> MorphTab:
+    gr.Markdown("Two shadows in, a performance out: the poses that turn the first shadow into the second.")
+    ends = []
+    with gr.Row():
+        for k, label in enumerate(["First shadow", "Last shadow"]):
+            with gr.Column():
+                value = example_names[k] if len(example_names) > k else None
+                ends.append(_sources(gr, label, ["Example", "Upload"], example_names, value, f"morph{k}-"))
+    with gr.Row():
+        frames = gr.Slider(8, 60, value=30, step=1, label="Frames", elem_id="frames")
+        hands = gr.Radio(["1", "2"], value="2", label="Hands", elem_id="morph-hands")
+        size = gr.Radio(SIZES, value="256", label="Detail (pixels)", elem_id="morph-size")
+        morph = gr.Button("Morph", variant="primary", elem_id="morph")
+    status = gr.Markdown("Pick two shapes and press **Morph** (a few minutes).", elem_id="morph-status")
+    with gr.Row():
+        video = gr.Video(label="Animation", elem_id="video")
+        gif = gr.Image(label="Animation (GIF)", type="filepath", elem_id="morph-gif")
+    return MorphTab(
+        ends=ends,
+        frames=frames,
+        hands=hands,
+        size=size,
+        morph=morph,
+        status=status,
+        video=video,
+        gif=gif,
+        path_plot=gr.Image(label="Path", type="filepath", elem_id="path-plot"),
+        zip_file=gr.File(label="Everything (zip)", elem_id="morph-zip"),
+    )
+
+
+def layout(gr, example_names: list[str]) -> tuple[ShadowTab, MorphTab]:
+    """The page's components, inside an open gr.Blocks; no behaviour."""
+    gr.Markdown(
+        "# handshadow\n"
+        "Make a shadow with your hands. **1.** Choose a shape: an example, your own picture (a photo of a "
+        "shadow on a wall works too), or a drawing. **2.** Press **Fit** and watch the hands find it. "
+        "**3.** Turn the 3D hands around, read how to hold them, and try it with a lamp and a wall."
+    )
+    with gr.Tab("Shadow"):
+        with gr.Row():
+            with gr.Column(scale=2, min_width=320):
+                left = _shape_column(gr, example_names)
+            with gr.Column(scale=3, min_width=420):
+                right = _result_column(gr)
+        shadow_tab = ShadowTab(**left, **right, finished=gr.State(None))
+    with gr.Tab("Morph"):
+        morph_tab = _morph_tab(gr, example_names)
+    return shadow_tab, morph_tab
+
+
+# -- Wiring --------------------------------------------------------------------------------
+
+
 def build_app(store: SessionStore | None = None):
-    """The Gradio Blocks of the app."""
+    """The Gradio Blocks of the app, and its session store."""
     import gradio as gr
 
     from handshadow import examples
-    from handshadow.errors import HandshadowError
-    from handshadow.fit import FitConfig
-    from handshadow.pipeline import fit_to_folder, interpolate_to_folder, resolve_target
 
     store = store or SessionStore()
-    example_names = [name for name, _ in examples.list_targets()]
 
     def session_of(request: gr.Request) -> Session:
-        return store.get(getattr(request, "session_hash", None) or "local")
+        return store.get(getattr(request, "session_hash", None))
 
-    def target_source(source, upload, drawing, example, folder: Path) -> str:
+    def show_source(choice):
+        return [gr.update(visible=choice == c) for c in ("Example", "Upload", "Draw")]
+
+    def chosen(source, upload, example):
+        return upload if source == "Upload" else example if source == "Example" else None
+
+    def show_reading(source, upload, example, invert, size):
         if source == "Draw":
-            image = _drawing(drawing)
-            if image is None:
-                raise ValueError("the sketchpad is empty: draw a shape first")
-            return str(_save_target(image, folder))
-        if source == "Upload":
-            return str(_save_target(upload, folder))
-        if not example:
-            raise ValueError("pick an example")
-        return example
+            return None, DRAW
+        return read_for_page(chosen(source, upload, example), invert, int(size))
 
-    def run_fit(
-        source,
-        upload,
-        drawing,
-        example,
-        hands,
-        limits,
-        quality,
-        light,
-        request: gr.Request,
-        progress=gr.Progress(),  # noqa: B008
-    ):
+    def on_fit(source, upload, drawing, example, hands, quality, limits, light, size, invert, request: gr.Request,
+               progress=gr.Progress()):  # noqa: B008  # fmt: skip
         session = session_of(request)
-        session.cancel.clear()
-        job = session.new_job("fit")
-        try:
-            target = target_source(source, upload, drawing, example, job / "input")
-            frame = resolve_target(target, 256, 256)
-        except (ValueError, HandshadowError) as exc:
-            raise gr.Error(str(exc)) from None
-        updates: queue.Queue = queue.Queue()
-        outcome: dict = {}
-
-        def on_progress(p):
-            updates.put(p)
-
-        def work():
-            try:
-                config = FitConfig(hands=hands, quality=quality, limits=limits, light=light, device=_device())
-                outcome["result"] = fit_to_folder(
-                    target,
-                    job / "result",
-                    config,
-                    show_progress=False,
-                    progress_hook=on_progress,
-                    stop=session.cancel.is_set,  # Cancel: the best result so far, as Ctrl-C
-                )
-            except Exception as exc:  # shown in the page
-                outcome["error"] = exc
-
-        thread = threading.Thread(target=work, daemon=True)
-        thread.start()
-        progress(0, desc="starting")
-        last_preview = None
-        while thread.is_alive() or not updates.empty():
-            try:
-                p = updates.get(timeout=0.25)
-            except queue.Empty:
-                continue
-            progress(min(1.0, p.done / max(p.total, 1)), desc=f"IoU {p.iou:.3f}")
-            if last_preview is None or time.perf_counter() - last_preview > 0.7:
-                last_preview = time.perf_counter()
-                yield _preview(frame, p.shadow), f"Fitting... IoU {p.iou:.3f}", None
-        thread.join()
-        if "error" in outcome:
-            raise gr.Error(str(outcome["error"]).splitlines()[0])
-        folder, result, lines = outcome["result"]
-        zip_path = shutil.make_archive(str(job / "handshadow-result"), "zip", folder)
-        s = result.score
-        status = (
-            ("Cancelled: best result so far. " if result.interrupted else "")
-            + str(s)
-            + (" (a success)" if s.success else "")
-            + "\n\n"
-            + "\n".join(line.strip() for line in lines)
+        options = FitOptions(
+            hands=hands, quality=quality, limits=limits, light=light, size=int(size), invert=bool(invert)
         )
-        yield str(folder / "overlay.png"), status, {"folder": str(folder), "zip": zip_path}
+        try:
+            target = target_source(source, upload, drawing, example, session.new_job("input"))
+        except ValueError as exc:
+            yield None, f"**Nothing to fit:** {exc}", None
+            return
+        for update in fit_steps(session, target, options):
+            if update.fraction is not None:
+                progress(update.fraction, desc=update.status.split("  \n")[0])
+            yield gr.skip() if update.preview is None else update.preview, update.status, update.finished
 
-    def show_result(done):
+    def on_result(finished):
         # A separate, non-streaming step: Gradio's 3D viewer does not mount from a generator.
-        if not done:
-            return [gr.skip()] * 6
-        folder = Path(done["folder"])
-        return (
-            str(folder / "shadow.png"),
-            str(folder / "hands.glb"),
-            str(folder / "guide.png"),
-            str(folder / "pose.json"),
-            done["zip"],
-            str(folder / "progress.gif"),
-        )
+        return result_files(finished) if finished else [gr.skip()] * 6
 
-    def cancel(request: gr.Request):
+    def on_leave(request: gr.Request):
+        store.drop(getattr(request, "session_hash", None))
+
+    def on_cancel(request: gr.Request):
         session_of(request).cancel.set()
-        return "Cancelling: keeping the best result so far..."
+        return CANCELLING
 
-    def run_morph(
-        source_a,
-        upload_a,
-        example_a,
-        source_b,
-        upload_b,
-        example_b,
-        frames,
-        hands,
-        request: gr.Request,
-        progress=gr.Progress(),  # noqa: B008
-    ):
+    def on_morph(source_a, example_a, upload_a, source_b, example_b, upload_b, frames, hands, size,
+                 request: gr.Request, progress=gr.Progress()):  # noqa: B008  # fmt: skip
         session = session_of(request)
-        job = session.new_job("morph")
         try:
-            a = target_source(source_a, upload_a, None, example_a, job / "a")
-            b = target_source(source_b, upload_b, None, example_b, job / "b")
-            for t in (a, b):
-                resolve_target(t, 64, 64)
-        except (ValueError, HandshadowError) as exc:
-            raise gr.Error(str(exc)) from None
-        progress(0.05, desc="fitting both ends and the path (a few minutes)")
-        config = FitConfig(hands=hands, quality="fast", device=_device())
-        try:
-            folder, report = interpolate_to_folder(
-                a, b, job / "result", config, frames=int(frames), show_progress=False
-            )
-        except HandshadowError as exc:
-            raise gr.Error(str(exc)) from None
-        zip_path = shutil.make_archive(str(job / "handshadow-morph"), "zip", folder)
-        return (
-            str(folder / "animation.mp4"),
-            str(folder / "animation.gif"),
-            str(folder / "path.png"),
-            report.summary(),
-            zip_path,
-        )
+            a = target_source(source_a, upload_a, None, example_a, session.new_job("a"))
+            b = target_source(source_b, upload_b, None, example_b, session.new_job("b"))
+        except ValueError as exc:
+            return None, None, None, None, f"**Nothing to morph:** {exc}"
+        progress(0.05, desc="fitting both ends and the path")
+        return morph_steps(session, a, b, int(frames), hands, int(size))
 
     with gr.Blocks(title="handshadow", analytics_enabled=False) as demo:
-        gr.Markdown(
-            "# handshadow\n"
-            "Make a shadow with your hands. **1.** Choose a shape: an example, your own picture, or a drawing. "
-            "**2.** Press **Fit** and watch the hands find it. **3.** Turn the 3D hands around, read how to hold "
-            "them, and try it with a lamp and a wall."
+        shadow, morph = layout(gr, [name for name, _ in examples.list_targets()])
+        picked = [shadow.source, shadow.upload, shadow.example, shadow.invert, shadow.size]
+        shadow.source.change(show_source, shadow.source, [shadow.example, shadow.upload, shadow.drawing], queue=False)
+        gr.on(  # one listener for all: its runs follow each other, the last choice is the one shown
+            [demo.load, *(component.change for component in picked)],
+            show_reading,
+            picked,
+            [shadow.reading, shadow.status],
+            queue=False,
+            trigger_mode="always_last",
         )
-        with gr.Tab("Shadow"):
-            with gr.Row():
-                with gr.Column(scale=2, min_width=320):
-                    source = gr.Radio(["Example", "Upload", "Draw"], value="Example", label="Shape", elem_id="source")
-                    example = gr.Dropdown(
-                        example_names,
-                        value=example_names[0] if example_names else None,
-                        label="Example",
-                        elem_id="example",
-                    )
-                    upload = gr.Image(
-                        label="Your picture: a dark shape on a light ground, or light on dark",
-                        type="numpy",
-                        image_mode="RGBA",
-                        sources=["upload", "clipboard"],
-                        visible=False,
-                        elem_id="upload",
-                    )
-                    drawing = gr.Sketchpad(
-                        label="Draw a filled shape (pick the brush first)",
-                        type="numpy",
-                        image_mode="RGBA",
-                        brush=gr.Brush(default_size=28, colors=["#000000"], color_mode="fixed"),
-                        canvas_size=(512, 512),
-                        visible=False,
-                        elem_id="sketchpad",
-                    )
-                    with gr.Accordion("Options", open=False):
-                        hands = gr.Radio(["1", "2", "auto"], value="auto", label="Hands")
-                        quality = gr.Radio(
-                            ["fast", "default", "best"], value="fast", label="Quality", info=QUALITY_HELP
-                        )
-                        limits = gr.Radio(
-                            ["anatomical", "paper"],
-                            value="anatomical",
-                            label="Joint limits",
-                            info="anatomical: real ranges of motion; paper: Table 1 of the 2023 paper",
-                        )
-                        light = gr.Radio(
-                            ["point", "directional"],
-                            value="point",
-                            label="Light",
-                            info="point: a lamp 2 m from the wall; directional: sunlight",
-                        )
-                    with gr.Row():
-                        fit_button = gr.Button("Fit", variant="primary", elem_id="fit")
-                        cancel_button = gr.Button("Cancel", elem_id="cancel")
-                    status = gr.Markdown("Pick a shape and press **Fit**.", elem_id="status")
-                    guide = gr.Image(label="How to hold your hands", type="filepath", elem_id="guide")
-                with gr.Column(scale=3, min_width=420):
-                    with gr.Row():
-                        preview = gr.Image(
-                            label="Shadow over target: grey both, red extra, blue missing",
-                            type="filepath",
-                            elem_id="preview",
-                            height=300,
-                        )
-                        shadow = gr.Image(label="The shadow", type="filepath", elem_id="shadow", height=300)
-                    model = gr.Model3D(
-                        label="3D: drag to turn. Hands, lamp (yellow) and wall",
-                        clear_color=(0.93, 0.94, 0.96, 1.0),
-                        elem_id="model3d",
-                        height=440,
-                    )
-                    with gr.Row():
-                        pose_file = gr.File(label="pose.json", elem_id="pose")
-                        zip_file = gr.File(label="Everything (zip)", elem_id="zip")
-                    with gr.Accordion("The search, step by step", open=False):
-                        progress_gif = gr.Image(label="progress.gif", type="filepath", elem_id="progress")
-
-            def show_source(choice):
-                return (
-                    gr.update(visible=choice == "Example"),
-                    gr.update(visible=choice == "Upload"),
-                    gr.update(visible=choice == "Draw"),
-                )
-
-            source.change(show_source, inputs=source, outputs=[example, upload, drawing], queue=False)
-            finished = gr.State(None)
-            fit_button.click(
-                run_fit,
-                inputs=[source, upload, drawing, example, hands, limits, quality, light],
-                outputs=[preview, status, finished],
-                concurrency_limit=1,
-            ).then(show_result, inputs=finished, outputs=[shadow, model, guide, pose_file, zip_file, progress_gif])
-            cancel_button.click(cancel, outputs=[status], queue=False)
-        with gr.Tab("Morph"):
-            gr.Markdown("Two shadows in, a performance out: the poses that turn the first shadow into the second.")
-            with gr.Row():
-                with gr.Column():
-                    source_a = gr.Radio(["Example", "Upload"], value="Example", label="First shadow")
-                    example_a = gr.Dropdown(
-                        example_names, value=example_names[0] if example_names else None, label="Example"
-                    )
-                    upload_a = gr.Image(label="Upload", type="numpy", image_mode="RGBA", sources=["upload"])
-                with gr.Column():
-                    source_b = gr.Radio(["Example", "Upload"], value="Example", label="Last shadow")
-                    example_b = gr.Dropdown(
-                        example_names, value=example_names[1] if len(example_names) > 1 else None, label="Example"
-                    )
-                    upload_b = gr.Image(label="Upload", type="numpy", image_mode="RGBA", sources=["upload"])
-            with gr.Row():
-                frames = gr.Slider(8, 60, value=30, step=1, label="Frames")
-                morph_hands = gr.Radio(["1", "2"], value="2", label="Hands")
-                morph_button = gr.Button("Morph", variant="primary", elem_id="morph")
-            with gr.Row():
-                video = gr.Video(label="Animation", elem_id="video")
-                gif = gr.Image(label="Animation (GIF)", type="filepath")
-            path_plot = gr.Image(label="Path", type="filepath")
-            summary = gr.Textbox(label="Summary")
-            morph_zip = gr.File(label="Everything (zip)")
-            morph_button.click(
-                run_morph,
-                inputs=[source_a, upload_a, example_a, source_b, upload_b, example_b, frames, morph_hands],
-                outputs=[video, gif, path_plot, summary, morph_zip],
-                concurrency_limit=1,
-            )
-
-        def _goodbye(request: gr.Request):
-            store.drop(getattr(request, "session_hash", None) or "local")
-
-        demo.unload(_goodbye)
+        shadow.fit.click(lambda: [None] * 6, outputs=shadow.results(), queue=False).then(
+            on_fit,
+            [shadow.source, shadow.upload, shadow.drawing, shadow.example, *shadow.options()],
+            [shadow.preview, shadow.status, shadow.finished],
+            concurrency_limit=1,  # one fit at a time uses every core; other visitors wait in line
+        ).then(on_result, shadow.finished, shadow.results())
+        shadow.cancel.click(on_cancel, outputs=[shadow.status], queue=False)
+        for source, example, upload in morph.ends:
+            source.change(lambda c: [gr.update(visible=c == "Example"), gr.update(visible=c == "Upload")],
+                          source, [example, upload], queue=False)  # fmt: skip
+        morph.morph.click(
+            on_morph,
+            [*morph.ends[0], *morph.ends[1], morph.frames, morph.hands, morph.size],
+            [morph.video, morph.gif, morph.path_plot, morph.zip_file, morph.status],
+            concurrency_limit=1,
+        )
+        demo.unload(on_leave)
     return demo, store
 
 
-def _device() -> str:
-    import torch
-
-    return "cuda" if torch.cuda.is_available() else "cpu"
-
-
-def _preview(target: np.ndarray, shadow: np.ndarray) -> np.ndarray:
-    from skimage.transform import resize
-
-    from handshadow.export.images import overlay_image
-
-    small_target = resize(target.astype(float), shadow.shape, order=0) > 0.5
-    ov = overlay_image(small_target, shadow > 0.5)
-    return (resize(ov.astype(float) / 255, (256, 256 * ov.shape[1] // ov.shape[0]), order=0) * 255).astype(np.uint8)
-
-
 def launch(host: str = "127.0.0.1", port: int | None = None, block: bool = True):
-    """Start the app; returns (demo, url) when not blocking."""
+    """Start the app; returns (demo, url) when not blocking. Without Gradio: a one-line
+    HandshadowError that says how to install it."""
+    for key, value in OFFLINE_ENV.items():
+        os.environ.setdefault(key, value)
     store = SessionStore()
     os.environ["GRADIO_TEMP_DIR"] = str(store.root / "gradio")  # Gradio's own cache, deleted with ours
-    import gradio as gr
+    try:
+        import gradio as gr
+    except ModuleNotFoundError as exc:
+        if not re.match(r"gradio\b", exc.name or ""):
+            raise
+        store.close()
+        raise HandshadowError(INSTALL_HINT) from None
 
     demo, _ = build_app(store)
     demo.queue(default_concurrency_limit=1)
     _, url, _ = demo.launch(
         server_name=host,
         server_port=port,
-        prevent_thread_lock=not block,
+        prevent_thread_lock=True,
         max_file_size=MAX_UPLOAD,
         share=False,
         ssr_mode=False,
         footer_links=[],
-        quiet=not block,
+        quiet=True,
         theme=gr.themes.Default(),
         allowed_paths=[str(store.root)],
     )
+    if block:
+        print(f"handshadow app on {url} (Ctrl-C to stop)", flush=True)
+        demo.block_thread()
     return demo, url

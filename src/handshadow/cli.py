@@ -44,28 +44,19 @@ def cmd_examples(args: argparse.Namespace) -> int:
 
 def resolve_device(name: str) -> str:
     """'cpu', 'cuda' (checked) or 'auto' (CUDA when present)."""
-    import torch
+    from handshadow.fit import resolve_device as resolve
 
-    if name == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if name == "cuda" or name.startswith("cuda:"):
-        if not torch.cuda.is_available():
-            raise HandshadowError("CUDA was asked for but no CUDA device is available here (use --device cpu)")
-        return name
-    if name == "cpu":
-        return name
-    raise HandshadowError(f"unknown device {name!r} (use cpu, cuda or auto)")
+    return resolve(name)
 
 
 def cmd_fit(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
-    from handshadow.target import load_target
 
     check_views(args)
     out = Path(args.out) if args.out else Path("out") / "-".join(Path(t).stem for t in args.target)
     ResultFolder(out, args.force)  # refuse a non-empty folder before any work
     for target in args.target:  # bad targets fail fast, before torch loads
-        load_target(examples.target_path(target), 64, 64, args.invert)
+        _check_target(target, args.invert)
     config = _fit_config(args)
     from handshadow.pipeline import fit_to_folder
 
@@ -135,6 +126,16 @@ def parse_weights(text: str) -> tuple[float, ...]:
     return weights
 
 
+def _check_target(source: str, invert: bool | None = None) -> None:
+    """Read a target once, small, before the heavy imports: an unusable one raises its
+    one-line error; an unsure reading prints its one-line warning."""
+    from handshadow.target import read_target
+
+    target = read_target(examples.target_path(source), 64, 64, invert)
+    if target.warning:
+        print(f"handshadow: warning: {source}: {target.warning}", file=sys.stderr)
+
+
 def _fit_config(args: argparse.Namespace):
     from handshadow.fit import FitConfig
 
@@ -170,12 +171,11 @@ def _fit_config(args: argparse.Namespace):
 
 def cmd_interpolate(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
-    from handshadow.target import load_target
 
     out = Path(args.out) if args.out else Path("out") / f"{Path(args.a).stem}-to-{Path(args.b).stem}"
     ResultFolder(out, args.force)
     for source in (args.a, args.b):
-        load_target(examples.target_path(source), 64, 64)
+        _check_target(source)
     config = _fit_config(args)
     from handshadow.pipeline import interpolate_to_folder
 
@@ -224,13 +224,23 @@ def _add_fit_options(p: argparse.ArgumentParser, hands_default: str = "auto", qu
     p.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log details")
 
 
+def cmd_print(args: argparse.Namespace) -> int:
+    from handshadow.export.printing import print_result
+
+    report = print_result(
+        args.result, out=args.out, height_mm=args.height_mm, stand=not args.no_stand, min_wall_mm=args.min_wall_mm
+    )
+    for line in report.lines():
+        print(line)
+    return 0
+
+
 def cmd_app(args: argparse.Namespace) -> int:
     if args.port is not None and not 0 < args.port < 65536:
         raise HandshadowError(f"--port must be 1..65535, got {args.port}")
     from handshadow.app import launch
 
-    print(f"handshadow app on http://{args.host}:{args.port or 7860} (Ctrl-C to stop)")
-    launch(args.host, args.port, block=True)
+    launch(args.host, args.port, block=True)  # prints its address once it listens
     return 0
 
 
@@ -281,7 +291,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_fit_options(p, hands_default="2", quality_default="best")  # both ends must be good: a morph is judged by them
     p.set_defaults(func=cmd_interpolate)
 
-    p = sub.add_parser("app", help="a local web page to make hand shadows")
+    p = sub.add_parser("print", help="a 3D-printable sculpture of a result's hands, on a stand, with the torch's place")
+    p.add_argument("result", help="a result folder written by 'fit' or 'render'")
+    p.add_argument("--out", help="the mesh file, .stl or .3mf (default: RESULT/print.stl and print.3mf)")
+    p.add_argument("--height-mm", type=float, default=150.0, help="height of the whole print (default 150)")
+    p.add_argument("--no-stand", action="store_true", help="the hands alone, without board, foot and rods")
+    p.add_argument("--min-wall-mm", type=float, default=1.2, help="thinnest part the printer makes (default 1.2)")
+    p.set_defaults(func=cmd_print)
+
+    p = sub.add_parser("app", help="a local web page to make hand shadows (needs the [app] extra: Gradio)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1, this computer only)")
     p.add_argument("--port", type=int, help="port (default: 7860 or the next free one)")
     p.set_defaults(func=cmd_app)

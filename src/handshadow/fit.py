@@ -42,6 +42,7 @@ from handshadow.search import (
     run_stages,
     separate,
 )
+from handshadow.search.atlas import load_atlas
 from handshadow.search.starts import choose_starts
 
 log = logging.getLogger(__name__)
@@ -51,10 +52,11 @@ QUALITY = ("fast", "default", "best")
 POLISH_ROUNDS = {"fast": (1, 0), "default": (2, 4), "best": (3, 6)}
 # --hands auto prefers one hand unless two score better by more than this (rank-key blend).
 ONE_HAND_PREFERENCE = 0.02
+CUDA_WIDER = 16  # on a GPU the search keeps this many times the hypotheses (see schedule)
 MAX_VIEWS = 2  # targets one pose may answer: today's lamp and wall, and one turned about the hands
 # With several views each shadow's outline is pulled by the other views too and settles more
-# slowly: a last exact stage at a small rate, at full resolution (height 2048 is cut to the size).
-VIEWS_SETTLE = Stage(height=2048, blur_px=0, attract_px=2, steps=0, keep=1, lr_scale=0.1, skeleton=0.0)
+# slowly: a last exact stage at a small rate, at full resolution (schedule sets height and steps).
+VIEWS_SETTLE = Stage(height=0, blur_px=0, attract_px=2, steps=0, keep=1, lr_scale=0.1, skeleton=0.0)
 VIEWS_SETTLE_STEPS = {"fast": 60, "default": 80, "best": 100}
 
 
@@ -75,7 +77,7 @@ class FitConfig:
     hands: str = "auto"
     size: int = 256
     iters: int | None = None
-    device: str = "cpu"
+    device: str = "auto"
     seed: int = 0
     hand_model: str = "anny"
     mano_dir: str | None = None
@@ -86,6 +88,7 @@ class FitConfig:
     time_limit_s: float | None = None
     exclude_library: tuple[str, ...] = ()
     performers: int = 1
+    atlas: bool = True
     view_angle_deg: float = 90.0
     view_weights: tuple[float, ...] | None = None
 
@@ -164,8 +167,25 @@ class HandCountFit:
         return failed, blend - (ONE_HAND_PREFERENCE if self.n_hands == 1 else 0.0)
 
 
-def schedule(quality: str, iters: int | None, size: int, views: int = 1) -> tuple[int, int, list[Stage]]:
-    """(random starts, kept starts, stages) for a quality, scaled to a total step budget; with
+def resolve_device(name: str) -> str:
+    """'cpu', 'cuda' / 'cuda:N' (checked) or 'auto' (CUDA when present, else the CPU)."""
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" or name.startswith("cuda:"):
+        if not torch.cuda.is_available():
+            raise HandshadowError("CUDA was asked for but no CUDA device is available here (use --device cpu)")
+        return name
+    if name == "cpu":
+        return name
+    raise HandshadowError(f"unknown device {name!r} (use cpu, cuda or auto)")
+
+
+def schedule(
+    quality: str, iters: int | None, size: int, device: str = "cpu", views: int = 1
+) -> tuple[int, int, list[Stage]]:
+    """(random starts, kept starts, stages) for a quality, scaled to a total step budget. On a
+    GPU a batch of a thousand hypotheses costs about what one does, so it keeps CUDA_WIDER
+    times the starts and CUDA_WIDER / 4 times the survivors of every stage but the last. With
     several views a last exact stage (VIEWS_SETTLE) settles the pose in all of them."""
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
@@ -201,9 +221,12 @@ def schedule(quality: str, iters: int | None, size: int, views: int = 1) -> tupl
             ],
         ),
     }[quality]
-    if views > 1:
-        stages = [*stages, dataclasses.replace(VIEWS_SETTLE, steps=VIEWS_SETTLE_STEPS[quality])]
     stages = [dataclasses.replace(st, height=min(st.height, size)) for st in stages]
+    if device.startswith("cuda"):
+        n_random, n_keep = n_random * CUDA_WIDER, n_keep * CUDA_WIDER
+        stages = [dataclasses.replace(st, keep=st.keep * CUDA_WIDER // 4) for st in stages[:-1]] + stages[-1:]
+    if views > 1:
+        stages = [*stages, dataclasses.replace(VIEWS_SETTLE, height=size, steps=VIEWS_SETTLE_STEPS[quality])]
     if iters is not None:
         total = sum(st.steps for st in stages)
         stages = [dataclasses.replace(st, steps=max(1, round(st.steps * iters / total))) for st in stages]
@@ -240,6 +263,7 @@ def fit_frame(
     search). config.time_limit_s bounds the search and the polish (not marked interrupted);
     the separation always completes."""
     t0 = time.perf_counter()
+    config = dataclasses.replace(config, device=resolve_device(config.device))
     # torch.optim imports torch._dynamo on first use, for seconds; a Ctrl-C inside that import
     # would leave it half-done and break every optimiser after it. Import it before the search,
     # where an interrupt has nothing to lose.
@@ -423,10 +447,14 @@ def _search(targets, scenes, n_hands, config, progress, deadline, extra_starts=N
     weights = config.view_weights or (1.0,) * len(targets)
     more = [ViewTarget(s, t, w / weights[0]) for s, t, w in zip(scenes[1:], targets[1:], weights[1:])]
     problem = make_problem(targets[0], scenes[0], sides, config, anchor, more)
-    n_random, n_keep, stages = schedule(config.quality, config.iters, targets[0].shape[0], len(targets))
-
+    n_random, n_keep, stages = schedule(config.quality, config.iters, targets[0].shape[0], config.device, len(targets))
     rng = np.random.default_rng(config.seed)
-    starts = choose_starts(problem, sides, n_random, n_keep, rng, extra_starts, config.exclude_library)
+    atlas = (
+        load_atlas(config.hand_model, config.forearm, config.limits)
+        if config.atlas and config.hand_model == "anny"
+        else None
+    )
+    starts = choose_starts(problem, sides, n_random, n_keep, rng, extra_starts, config.exclude_library, atlas)
     res = run_stages(problem, starts, stages, progress=progress, deadline_s=deadline, stop=stop)
     return HandCountFit(n_hands, sides, problem, res)
 

@@ -38,7 +38,6 @@ PART_DEPTH_SHARE = 0.008
 PART_MIN_SHARE = 0.01
 
 
-
 @dataclasses.dataclass(frozen=True)
 class FitScore:
     iou: float

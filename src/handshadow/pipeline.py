@@ -15,17 +15,16 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from skimage.transform import resize
 from tqdm import tqdm
 
 from handshadow import examples
 from handshadow.errors import HandshadowError
 from handshadow.export.files import ResultFolder, require_mp4, shadow_image, write_gif, write_json, write_mp4, write_png
-from handshadow.export.images import mask_image, overlay_image
+from handshadow.export.images import mask_image, overlay_image, overlay_preview
 from handshadow.export.meshes import write_glb, write_obj
 from handshadow.export.pictures import performer_framing, performer_view, plan_picture, scene_picture
 from handshadow.export.plots import path_plot
-from handshadow.fit import FitConfig, FitResult, fit_frame, schedule, view_scenes
+from handshadow.fit import FitConfig, FitResult, fit_frame, resolve_device, schedule, view_scenes
 from handshadow.guide import describe, guide_image, guide_views_image, lamp_lines, view_lines
 from handshadow.hands import load_hand
 from handshadow.hands.posed import PosedMesh, cast_shadows
@@ -116,21 +115,13 @@ def progress_frames(
     for f, vs in zip(frames, vertices):
         meshes = [(h.side, v, fs) for h, fs, v in zip(posed.hands, faces, vs)]
         view = performer_view(posed.scene, meshes, size=(size, size), supersample=1, framing=framing)
-        overlays = [_small_overlay(t, m, size) for t, m in zip(targets, (f.shadow, *f.more_shadows))]
+        overlays = [overlay_preview(t, m, size) for t, m in zip(targets, (f.shadow, *f.more_shadows))]
         frame = np.concatenate([view, *overlays], 1)
         frame[-14:, :] = 255
         bar = int(frame.shape[1] * f.done / max(f.total, 1))
         frame[-10:-4, :bar] = (70, 130, 200)
         out.append(frame)
     return out
-
-
-def _small_overlay(target: np.ndarray, shadow: np.ndarray, size: int) -> np.ndarray:
-    """A shadow (h, w) in [0, 1] over the target (H, W) bool, at the shadow's resolution,
-    scaled to size pixels high: (size, W', 3) uint8."""
-    small_target = resize(target.astype(float), shadow.shape, order=0) > 0.5
-    ov = overlay_image(small_target, shadow > 0.5)
-    return (resize(ov.astype(float) / 255, (size, size * ov.shape[1] // ov.shape[0]), order=0) * 255).astype(np.uint8)
 
 
 def fit_to_folder(
@@ -159,8 +150,7 @@ def fit_to_folder(
     sources = [target_source] if isinstance(target_source, str) else list(target_source)
     frames = [resolve_target(source, config.size, config.size, invert) for source in sources]
     view_scenes(frames, config)  # bad view options fail here, before the work
-    _, _, stages = schedule(config.quality, config.iters, config.size, len(frames))
-
+    _, _, stages = schedule(config.quality, config.iters, config.size, resolve_device(config.device), len(frames))
     searches = 2 if config.hands == "auto" else 1  # fit_frame runs one search per hand count
     total = sum(s.steps for s in stages) * searches
     recorder = FrameRecorder(total, searches)

@@ -161,10 +161,11 @@ class HandPoseBatch:
 @dataclasses.dataclass(frozen=True)
 class Origin:
     """Where a search start came from: a library pose (by name, maybe mirrored), a random
-    hand, or a start the caller gave (e.g. a morph's other end); ``aligned`` when it was moved
-    onto the target by the 2D alignment."""
+    hand, an atlas entry (by number; two hands: 'first+second'), or a start the caller gave
+    (e.g. a morph's other end); ``aligned`` when it was moved onto the target by the 2D
+    alignment."""
 
-    kind: Literal["library", "random", "given"]
+    kind: Literal["library", "random", "given", "atlas"]
     name: str = ""
     mirrored: bool = False
     aligned: bool = False

@@ -1,45 +1,147 @@
-"""Target images -> the binary target frame.
+"""Target images -> the binary target frame: the one reading of an image file that the command
+line, the Python API and the app share.
 
-Any image that imageio reads (PNG, JPEG, GIF, BMP, ...), with or without alpha, any size and
-aspect, binary or anti-aliased. The shape is told from the ground by the border: the colour
-that covers most of the image's outer ring is the ground (a dark shadow on a light wall, or a
-light shape on a dark ground); ``invert`` overrides. With alpha, transparent pixels are ground.
-The shape is letterboxed (aspect kept, centred) into the W x H frame and thresholded at half
-coverage, so anti-aliased edges land where they should.
+Any image that Pillow (or imageio) reads (PNG, JPEG, GIF, BMP, WebP, TIFF, ...; palette,
+16-bit, CMYK, animated: the first frame; a phone's rotation tag applied), with or without
+alpha, any size and aspect. With varying alpha the shape is the opaque part. Otherwise the
+shape is told from the ground by the border: the brightness that dominates the image's outer
+ring is the ground (a dark shadow on a light wall, or a light shape on a dark ground);
+``invert`` flips the choice.
+
+Two readings, chosen by the image:
+
+- **Clean** (a mask, a drawing, a rendered shadow: the ground is even): stretch between the
+  ground and the shape level (1st and 99th percentiles), so grey shadows count.
+- **Photo** (the ground's light is uneven: a lamp's hot spot, vignetting, a sheet of paper
+  lit from one side): the wall's light is estimated at a scale larger than the shape (a grey
+  closing over a square 0.6 of the picture wide, on a 64-pixel copy; the image is padded by
+  its edge so light falling off toward the corners is kept) and divided out; the threshold
+  lies midway between the two levels that Otsu's split finds. Holes in the shape and pieces
+  touching the border whose outlines are much softer than the shape's are light, not shape
+  (a hot spot behind a large shadow, dark corners), and are put right.
+
+Either way the coverage is letterboxed (aspect kept, centred) into the W x H frame and
+thresholded at one half, so anti-aliased and soft edges land where they should. A clean image
+never takes the photo path, so masks read exactly as they always have.
+
+A tilt of the camera is not undone: a few degrees of perspective change the shape by a few
+per cent; a strongly slanted photo gives a slanted target. A photo whose frame shows more than
+the wall (the edge of the paper, the lamp, furniture) reads those as shape too; crop it first.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage as ndi
 
 from handshadow.errors import HandshadowError
 
 MIN_SIDE_PX = 8
 MAX_PIXELS = 64_000_000
+LUMA = np.array([0.299, 0.587, 0.114])  # ITU-R 601 weights: RGB -> brightness
+
+# The photo path (see the module docstring).
+WORK_PX = 64  # longer side of the copy on which the wall's light is estimated
+ENVELOPE_SHARE = 0.6  # the closing's square, a share of that side: darker parts narrower than this are filled
+UNEVEN_GROUND = 0.1  # the ground's light varies by more than this share of the contrast: read as a photo
+SOFT_EDGE = 0.35  # an outline this much softer than the shape's typical one is light, not an edge
+MIN_CONTRAST = 0.1  # a shape less darker (or lighter) than its ground than this is no shape
+NOISE_MARGIN = 6  # ... and so is one that stands out less than this many times the ground's noise
+FAINT = 0.25  # a shape this little darker (or lighter) than its ground is read, with a warning
+PUT_RIGHT_SHARE = 0.005  # pieces put right over this share of the picture are worth a warning
+SOFT_OUTLINE = 0.15  # a reading whose outline is this soft in part is worth a warning
+EPS = 0.01  # keeps ratios of dark pixels finite
 
 
 class TargetError(HandshadowError):
     """A target image that cannot be used."""
 
 
+@dataclasses.dataclass(frozen=True)
+class Reading:
+    """How an image was read.
+
+    coverage: (h, w) float in [0, 1], how much each pixel belongs to the shape.
+    photo: True when the ground's uneven light was taken out first.
+    warning: one line when the reading is unsure (say what to check), else None."""
+
+    coverage: np.ndarray
+    photo: bool = False
+    warning: str | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Target:
+    """A target frame: frame (H, W) bool, True in the shape; warning as in Reading."""
+
+    frame: np.ndarray
+    warning: str | None = None
+
+
 def read_image(path: str | Path) -> np.ndarray:
     """(h, w, 4) float RGBA in [0, 1] (alpha 1 where the file has none)."""
-    import imageio.v3 as iio
+    from PIL import Image, ImageOps, UnidentifiedImageError
 
     path = Path(path)
     if not path.is_file():
         raise TargetError(f"target not found: {path} (give an image file or a built-in example name)")
     try:
+        with Image.open(path) as im:
+            _check_size(path, im.width, im.height)
+            image = _pixels(ImageOps.exif_transpose(im))
+    except TargetError:
+        raise
+    except Image.DecompressionBombError:
+        raise TargetError(f"{path} is too large (more than {MAX_PIXELS // 1_000_000} megapixels)") from None
+    except UnidentifiedImageError:
+        image = _read_with_imageio(path)  # formats only imageio's plugins know
+    except Exception as exc:  # Pillow raises many kinds for damaged files
+        raise TargetError(f"{path} is not a readable image ({exc.__class__.__name__})") from None
+    return _as_rgba(image, path)
+
+
+def _check_size(path: Path, width: int, height: int) -> None:
+    if width * height > MAX_PIXELS:
+        raise TargetError(f"{path} is too large ({width} x {height} pixels)")
+
+
+def _pixels(im) -> np.ndarray:
+    """A Pillow image's first frame as an array: grey, grey + alpha, RGB or RGBA; uint8 or
+    uint16 (16-bit files), bool for 1-bit ones."""
+    mode = im.mode
+    transparent = "transparency" in im.info
+    if mode in ("1", "L", "LA", "RGB", "RGBA") and not (transparent and mode in ("L", "RGB")):
+        return np.asarray(im)
+    if mode.startswith("I;16"):
+        return np.asarray(im).astype(np.uint16)
+    if mode == "I":  # 32-bit integers: mostly 16-bit data
+        values = np.asarray(im)
+        return np.clip(values, 0, 65535).astype(np.uint16) if values.max() > 255 else values.astype(np.uint8)
+    if mode == "F":
+        values = np.asarray(im, dtype=np.float64)
+        return values / max(1.0, float(values.max()))
+    # Palettes, CMYK (Adobe's inverted CMYK included), YCbCr, LAB, HSV, premultiplied alpha.
+    keeps_alpha = transparent or "A" in mode.upper()
+    return np.asarray(im.convert("RGBA" if keeps_alpha else "RGB"))
+
+
+def _read_with_imageio(path: Path) -> np.ndarray:
+    import imageio.v3 as iio
+
+    try:
         props = iio.improps(path)
-        if int(np.prod(props.shape[:2])) > MAX_PIXELS:
-            raise TargetError(f"{path} is too large ({props.shape[1]} x {props.shape[0]} pixels)")
-        image = np.asarray(iio.imread(path, index=0))
+        _check_size(path, *reversed(props.shape[:2]))
+        return np.asarray(iio.imread(path, index=0))
     except TargetError:
         raise
     except Exception as exc:  # imageio raises many kinds for unreadable files
         raise TargetError(f"{path} is not a readable image ({exc.__class__.__name__})") from None
+
+
+def _as_rgba(image: np.ndarray, path: Path) -> np.ndarray:
     if image.dtype == bool:
         image = image.astype(np.uint8) * 255
     scale = 65535.0 if image.dtype == np.uint16 else 255.0 if image.dtype.kind in "ui" else 1.0
@@ -61,29 +163,218 @@ def read_image(path: str | Path) -> np.ndarray:
     return np.clip(image, 0.0, 1.0)
 
 
-def shape_coverage(rgba: np.ndarray, invert: bool | None = None) -> np.ndarray:
-    """(h, w) in [0, 1]: how much each pixel belongs to the shape.
+def read_shape(rgba: np.ndarray, invert: bool | None = None) -> Reading:
+    """How much each pixel of (h, w, 4) RGBA in [0, 1] belongs to the shape, and how surely.
 
     With varying alpha the shape is the opaque part (darkness decides only where the image is
-    opaque throughout). Otherwise the ground is the brightness that dominates the border.
-    """
+    opaque throughout). Otherwise the ground is the brightness that dominates the border, and
+    a ground with uneven light is evened out first (the photo path)."""
     alpha = rgba[..., 3]
-    grey = rgba[..., :3] @ np.array([0.299, 0.587, 0.114])
     if alpha.min() < 0.99:
-        cover = alpha.copy()
-        if invert:
-            cover = 1.0 - cover
-        return cover
-    border = np.concatenate([grey[0], grey[-1], grey[:, 0], grey[:, -1]])
-    dark_ground = np.median(border) < 0.5
+        return Reading(1.0 - alpha if invert else alpha.copy())
+    grey = rgba[..., :3] @ LUMA
+    dark_ground = np.median(_ring(grey)) < 0.5
     cover = grey if dark_ground else 1.0 - grey
     if invert:
         cover = 1.0 - cover
     # Stretch between the ground level and the shape level so grey shadows still count.
     lo, hi = np.percentile(cover, 1), np.percentile(cover, 99)
-    if hi - lo < 0.2:
-        return np.zeros_like(cover)
-    return np.clip((cover - lo) / (hi - lo), 0.0, 1.0)
+    if hi - lo < 0.2:  # not a clean shape; a dim photo's may still be there, relative to its wall
+        return _read_photo(grey, invert)
+    cover = np.clip((cover - lo) / (hi - lo), 0.0, 1.0)
+    # Clean: the border sits at the ground's end of the range, and the ground is even (judged
+    # before ``invert``, which says the other end is the shape).
+    auto = 1.0 - cover if invert else cover
+    if np.median(_ring(auto)) <= UNEVEN_GROUND and _ground_spread(auto) <= UNEVEN_GROUND:
+        return Reading(cover)
+    return _read_photo(grey, invert)
+
+
+def shape_coverage(rgba: np.ndarray, invert: bool | None = None) -> np.ndarray:
+    """(h, w) in [0, 1]: how much each pixel belongs to the shape (``read_shape``'s coverage)."""
+    return read_shape(rgba, invert).coverage
+
+
+def _small(image: np.ndarray, side_px: int) -> np.ndarray:
+    """A copy averaged over f x f blocks whose longer side is about ``side_px`` (never enlarged)."""
+    f = max(1, round(max(image.shape) / side_px))
+    if f == 1:
+        return image
+    return ndi.uniform_filter(image, f, mode="nearest")[f // 2 :: f, f // 2 :: f]
+
+
+def _ground_spread(cover: np.ndarray) -> float:
+    """How unevenly the ground is lit: the 2-98 % range of the coverage over the ground, away
+    from the shape, on a small copy (which averages noise and JPEG ringing away)."""
+    small = _small(cover, WORK_PX)
+    ground = ndi.binary_erosion(small < 0.5, iterations=2, border_value=1)
+    if ground.sum() < 16:
+        return 0.0
+    lo, hi = np.percentile(small[ground], [2, 98])
+    return float(hi - lo)
+
+
+def _wall_light(grey: np.ndarray, dark_shape: bool) -> np.ndarray:
+    """(h, w) the ground's brightness under the shape as well: a grey closing (for a dark
+    shape; an opening for a light one) over a square ENVELOPE_SHARE of the picture wide.
+
+    The picture is padded by its own edge first: then light that falls off toward a border or
+    a corner (any light whose brighter parts are convex: a lamp's spot, vignetting) comes
+    through the closing unchanged, while the shape, narrower than the square, is filled."""
+    from skimage.transform import resize
+
+    small = _small(grey, WORK_PX)
+    k = max(3, int(ENVELOPE_SHARE * max(small.shape)) | 1)
+    padded = np.pad(small, k, mode="edge")
+    envelope = ndi.grey_closing(padded, size=(k, k)) if dark_shape else ndi.grey_opening(padded, size=(k, k))
+    envelope = ndi.gaussian_filter(envelope[k:-k, k:-k], 1.5, mode="nearest")  # the square's steps
+    return resize(envelope, grey.shape, order=1)
+
+
+def _contrast_coverage(grey: np.ndarray, light: np.ndarray, dark_shape: bool) -> tuple[np.ndarray, float]:
+    """Coverage from the picture over the wall's light: 0 at the ground's level, 1 at the
+    shape's, one half midway (the two levels are the medians of Otsu's two classes). Returns
+    (coverage, contrast: how much darker, or lighter, the shape is than its ground)."""
+    from skimage.filters import threshold_otsu
+
+    if dark_shape:
+        depth = 1 - (grey + EPS) / (light + EPS)  # 0 on the wall, 1 for a black shadow
+    else:
+        depth = 1 - (1 - grey + EPS) / (1 - light + EPS)
+    depth = ndi.gaussian_filter(depth, max(1.0, max(grey.shape) / 600))  # sensor noise
+    clipped = np.clip(depth, -0.5, 1.0)
+    if np.ptp(clipped) < 1e-6:
+        return np.zeros_like(grey), 0.0
+    split = threshold_otsu(clipped)
+    ground_depth = depth[depth < split]
+    ground, shape = np.median(ground_depth), np.median(depth[depth >= split])
+    contrast = float(shape - ground)
+    noise = 1.4826 * float(np.median(np.abs(ground_depth - ground)))  # the ground's spread, robustly
+    if contrast < NOISE_MARGIN * noise:  # Otsu split the noise of an empty picture
+        contrast = 0.0
+    return np.clip((depth - ground) / max(contrast, 1e-3), 0.0, 1.0), contrast
+
+
+def _ring(image: np.ndarray) -> np.ndarray:
+    """The image's outer ring of pixels, (2 (h + w),)."""
+    return np.concatenate([image[0], image[-1], image[:, 0], image[:, -1]])
+
+
+@dataclasses.dataclass(frozen=True)
+class _PhotoReading:
+    """One polarity's reading of a photo: coverage (h, w) in [0, 1], contrast (how much darker,
+    or lighter, the shape is than its ground), put_right (share of pixels whose soft-edged
+    pieces were put right), spread (the ground's unevenness left) and border (share of the
+    outer ring read as shape)."""
+
+    coverage: np.ndarray
+    contrast: float
+    put_right: float
+    spread: float
+    border: float
+
+    @property
+    def misfit(self) -> float:
+        """Lower is likelier: the ground holds the border and is even once the light is out
+        (the wrong polarity leaves the light's unevenness in its ground); no shape is unlikely."""
+        return self.border + self.spread + (1.0 if self.contrast < MIN_CONTRAST else 0.0)
+
+
+def _read_photo(grey: np.ndarray, invert: bool | None) -> Reading:
+    """The photo path: even out the wall's light, split shape from ground, put soft-edged
+    pieces right. Both a dark and a light shape are read; the likelier is kept (the other
+    with ``invert``)."""
+    readings = []
+    for dark_shape in (True, False):
+        coverage, contrast = _contrast_coverage(grey, _wall_light(grey, dark_shape), dark_shape)
+        coverage, put_right = _soft_pieces(coverage)
+        border = float((_ring(coverage) >= 0.5).mean())
+        readings.append(_PhotoReading(coverage, contrast, put_right, _ground_spread(coverage), border))
+    readings.sort(key=lambda r: r.misfit)
+    r = readings[1 if invert else 0]
+    if r.contrast < MIN_CONTRAST:
+        return Reading(np.zeros_like(grey), photo=True)
+    warning = None
+    if r.contrast < FAINT:
+        warning = f"the shape is faint ({r.contrast:.0%} from its ground): check target.png"
+    elif r.put_right > PUT_RIGHT_SHARE:
+        warning = f"the light is uneven across the shape ({r.put_right:.0%} read by its outline): check target.png"
+    elif r.spread > UNEVEN_GROUND:
+        warning = "the ground is uneven: check target.png"
+    elif (soft := _soft_outline(r.coverage)) > SOFT_OUTLINE:
+        warning = f"{soft:.0%} of the outline is soft, perhaps light rather than shape: check target.png"
+    return Reading(r.coverage, photo=True, warning=warning)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Outline:
+    """The shape's outline in a coverage map: steepness (h, w), the coverage's gradient per
+    1/128 of the picture (the same for any resolution); outline (h, w) bool, the shape's edge
+    pixels; limit, the steepness below which an outline is soft (SOFT_EDGE times the shape's
+    typical, 75th-percentile, steepness)."""
+
+    steepness: np.ndarray
+    outline: np.ndarray
+    limit: float
+
+    @classmethod
+    def of(cls, coverage: np.ndarray) -> _Outline | None:
+        unit = max(coverage.shape) / 128
+        gy, gx = np.gradient(ndi.gaussian_filter(coverage, max(1.0, unit)))
+        steepness = np.hypot(gx, gy) * unit
+        shape = coverage >= 0.5
+        outline = shape & ~ndi.binary_erosion(shape, border_value=1)
+        if not outline.any():
+            return None
+        return cls(steepness, outline, SOFT_EDGE * float(np.percentile(steepness[outline], 75)))
+
+    def soft_share(self) -> float:
+        """The share of the outline that is soft: light, not an edge."""
+        return float((self.steepness[self.outline] < self.limit).mean())
+
+
+def _soft_outline(coverage: np.ndarray) -> float:
+    edges = _Outline.of(coverage)
+    return 0.0 if edges is None else edges.soft_share()
+
+
+def _soft_pieces(coverage: np.ndarray) -> tuple[np.ndarray, float]:
+    """Fill the shape's holes and drop its pieces at the border whose outlines are soft
+    (see _Outline): a hot spot behind a large shadow reads as a hole with no edge, dark
+    corners as pieces with no edge. Returns (coverage, share of pixels changed)."""
+    edges = _Outline.of(coverage)
+    if edges is None:
+        return coverage, 0.0
+    shape = coverage >= 0.5
+    grow = max(1, round(2 * max(coverage.shape) / 128))
+    # Holes: pieces of ground that do not touch the border.
+    rim = ~shape & ndi.binary_dilation(shape)
+    holes = _soft_components(~shape, rim, edges.steepness, edges.limit, inner=True)
+    filled = holes | (ndi.binary_dilation(holes, iterations=grow) & ~shape)
+    # Pieces of shape that touch the border.
+    dropped = ndi.binary_dilation(
+        _soft_components(shape, edges.outline, edges.steepness, edges.limit, inner=False), iterations=grow
+    )
+    coverage = np.where(dropped, 0.0, np.where(filled, 1.0, coverage))
+    return coverage, float((filled | (dropped & shape)).mean())
+
+
+def _soft_components(
+    region: np.ndarray, edge: np.ndarray, steepness: np.ndarray, limit: float, inner: bool
+) -> np.ndarray:
+    """The connected pieces of ``region`` whose ``edge`` pixels are on average less steep than
+    ``limit``: those that do not touch the border (inner) or those that do (not inner)."""
+    labels, n = ndi.label(region)
+    if n == 0:
+        return np.zeros_like(region)
+    at_border = np.zeros(n + 1, bool)
+    at_border[_ring(labels)] = True
+    index = np.arange(1, n + 1)
+    mean = np.asarray(ndi.mean(steepness, labels=np.where(edge, labels, 0), index=index))
+    has_edge = np.asarray(ndi.sum(edge, labels=labels, index=index)) > 0
+    soft = np.zeros(n + 1, bool)
+    soft[1:] = has_edge & (np.nan_to_num(mean) < limit) & (at_border[1:] != inner)
+    return soft[labels]
 
 
 def letterbox(coverage: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -100,11 +391,18 @@ def letterbox(coverage: np.ndarray, width: int, height: int) -> np.ndarray:
     return frame
 
 
+def read_target(path: str | Path, width: int = 256, height: int = 256, invert: bool | None = None) -> Target:
+    """The binary target frame (height, width), checked for a usable shape, with the reading's
+    warning when it is unsure."""
+    reading = read_shape(read_image(path), invert)
+    frame = letterbox(reading.coverage, width, height) >= 0.5
+    check_target(frame, str(path))
+    return Target(frame, reading.warning)
+
+
 def load_target(path: str | Path, width: int = 256, height: int = 256, invert: bool | None = None) -> np.ndarray:
     """The binary target frame (height, width) bool, checked for a usable shape."""
-    frame = letterbox(shape_coverage(read_image(path), invert), width, height) >= 0.5
-    check_target(frame, str(path))
-    return frame
+    return read_target(path, width, height, invert).frame
 
 
 def check_target(frame: np.ndarray, name: str = "target") -> None:

@@ -1,6 +1,20 @@
-"""Per-session folders: separate, and gone when the session ends or the app stops."""
+"""The app's work without a browser: per-session folders, the job object, the reading shown
+before Fit, messages in words, and the app without Gradio."""
 
-from handshadow.app import SessionStore, _drawing
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from handshadow import photos
+from handshadow.app import INSTALL_HINT, Job, SessionStore, _drawing, in_words, read_for_page
+from handshadow.examples import target_path
+from handshadow.target import TargetError, load_target
 
 
 def test_sessions_are_separate_and_cleaned_up():
@@ -18,10 +32,94 @@ def test_sessions_are_separate_and_cleaned_up():
 
 
 def test_empty_drawing_is_recognised():
-    import numpy as np
-
     blank = {"composite": np.zeros((20, 20, 4), np.uint8), "layers": [], "background": None}
     assert _drawing(blank) is None
     inked = {"composite": np.zeros((20, 20, 4), np.uint8)}
     inked["composite"][5:9, 5:9, 3] = 255
     assert _drawing(inked) is not None
+
+
+def test_a_job_reports_until_it_is_cancelled():
+    def work(report, stop):
+        k = 0
+        while not stop():
+            report(k)
+            k += 1
+            time.sleep(0.01)
+        return f"stopped after {k}"
+
+    cancel = threading.Event()
+    job = Job(work, cancel).start()
+    seen = []
+    for update in job.updates(poll_s=0.05):
+        seen.append(update)
+        if len(seen) == 5:
+            cancel.set()
+    assert seen[:5] == [0, 1, 2, 3, 4]
+    assert job.outcome() == f"stopped after {len(seen)}"
+
+
+def test_a_job_hands_back_its_error():
+    def work(report, stop):
+        report("half way")
+        raise TargetError("bad.png: no shape found")
+
+    job = Job(work, threading.Event()).start()
+    assert list(job.updates(poll_s=0.05)) == ["half way"]
+    with pytest.raises(TargetError, match="no shape found"):
+        job.outcome()
+
+
+def test_the_page_shows_the_shape_as_it_will_be_read(tmp_path):
+    picture, status = read_for_page("rabbit", size=64)
+    assert picture.shape == (256, 256) and picture.dtype == np.uint8 and "Press **Fit**" in status
+    frame = picture[::4, ::4]  # a 64-pixel frame shown four times as large
+    assert np.array_equal(np.repeat(np.repeat(frame, 4, 0), 4, 1), picture)
+    assert np.array_equal(frame < 128, load_target(target_path("rabbit"), 64, 64))
+    assert read_for_page(None) == (None, "Pick a shape and press **Fit**.")
+
+
+def test_an_unusable_upload_is_told_in_words_with_its_own_name(tmp_path):
+    upload = tmp_path / "gradio" / "4f1c0a" / "blank.png"
+    upload.parent.mkdir(parents=True)
+    iio.imwrite(upload, np.full((50, 80), 250, np.uint8))
+    frame, status = read_for_page(str(upload))
+    assert frame is None and "no shape found" in status and "blank.png" in status
+    assert str(tmp_path) not in status and "--invert" not in status and "\n" not in status
+
+
+def test_an_unsure_reading_is_shown_with_its_warning(tmp_path):
+    shape = iio.imread(target_path("deer")) < 128
+    faint = photos.PhotoEffects(hot_spot=0.5, vignetting=0.4, darkness=0.2, noise=0.02)
+    photo, _ = photos.photo_of(shape, faint, np.random.default_rng(2))
+    iio.imwrite(tmp_path / "wall.png", photo)
+    frame, status = read_for_page(str(tmp_path / "wall.png"))
+    assert frame is not None and "check target.png" in status
+
+
+def test_messages_name_the_page_not_the_command_line():
+    exc = TargetError("/tmp/x/y/cat.gif: no shape found (the image looks empty; use --invert if ...)")
+    words = in_words(exc, "/tmp/x/y/cat.gif")
+    assert words == "cat.gif: no shape found (the image looks empty; tick Invert (in Options) if ...)"
+    assert in_words(ValueError("first line\nsecond")) == "first line"
+
+
+def _python(code: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+
+
+def test_without_gradio_the_app_says_how_to_install_it():
+    code = "import sys; sys.modules['gradio'] = None\nfrom handshadow.cli import main\nsys.exit(main(['app']))"
+    run = _python(code)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.strip() == "handshadow: error: " + INSTALL_HINT
+    assert "pip install 'handshadow[app]'" in INSTALL_HINT
+    assert "Traceback" not in run.stderr and run.stdout == ""
+
+
+def test_importing_the_app_changes_no_environment():
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("GRADIO_", "HF_HUB_"))}
+    code = "import os, handshadow.app\nprint(sorted(k for k in os.environ if k.startswith(('GRADIO_', 'HF_HUB_'))))"
+    run = _python(code, env)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "[]"

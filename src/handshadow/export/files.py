@@ -63,6 +63,44 @@ class ResultFolder:
         shutil.rmtree(self.staging, ignore_errors=True)
 
 
+class StagedFiles:
+    """Writes files beside their final names and moves them all into place on ``commit``;
+    for outputs that join an existing folder (a result's print.stl). Until ``commit`` every
+    final path is left as it was; a failure removes what was staged.
+
+        with StagedFiles([out / "a.stl", out / "a.json"]) as files:
+            write_json(files["a.json"], data)   # a hidden sibling of out / "a.json"
+            ...
+            files.commit()
+    """
+
+    def __init__(self, paths: list[Path]):
+        self.paths = [Path(p) for p in paths]
+        self.staged = {p.name: p.parent / f".{p.name}.partial-{os.getpid()}" for p in self.paths}
+
+    def __enter__(self) -> StagedFiles:
+        for path in self.paths:
+            if path.is_dir():
+                raise OutputError(f"output path {path} is a folder")
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise OutputError(f"cannot write to {path.parent}: {exc.strerror}") from None
+        return self
+
+    def __getitem__(self, name: str) -> Path:
+        return self.staged[name]
+
+    def commit(self) -> list[Path]:
+        for path in self.paths:
+            os.replace(self.staged[path.name], path)
+        return self.paths
+
+    def __exit__(self, *exc) -> None:
+        for staged in self.staged.values():
+            staged.unlink(missing_ok=True)
+
+
 def write_png(path: Path, image: np.ndarray) -> None:
     """Write a uint8 (H, W) or (H, W, 3|4) image."""
     iio.imwrite(path, np.ascontiguousarray(image), extension=".png")

@@ -26,3 +26,16 @@ def overlay_image(target: np.ndarray, shadow: np.ndarray) -> np.ndarray:
 def mask_image(mask: np.ndarray) -> np.ndarray:
     """(H, W) bool -> uint8 black shape on white."""
     return np.where(np.asarray(mask, bool), 0, 255).astype(np.uint8)
+
+
+def overlay_preview(target: np.ndarray, shadow: np.ndarray, height: int) -> np.ndarray:
+    """(height, height * w / h, 3) uint8: a search snapshot's overlay, as progress.gif and the
+    app's live preview show it. target (H, W) bool; shadow (h, w) float at the snapshot's
+    resolution, in shadow where > 0.5. The target is brought to the shadow's size, then the
+    overlay to ``height`` rows; nearest pixel both times, so pixels stay crisp."""
+    from skimage.transform import resize
+
+    small_target = resize(np.asarray(target, float), shadow.shape, order=0) > 0.5
+    ov = overlay_image(small_target, shadow > 0.5)
+    width = height * ov.shape[1] // ov.shape[0]
+    return (resize(ov.astype(float) / 255, (height, width), order=0) * 255).astype(np.uint8)

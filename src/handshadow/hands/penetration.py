@@ -27,6 +27,8 @@ import igl
 import numpy as np
 import torch
 
+from handshadow.hands.rig import boundary_loops
+
 TOLERANCE_MM = 3.0  # what skin gives: deeper than this, the pose cannot be held
 FINGER_BASE = 0  # segment index of a finger's base (MCP; the thumb's CMC)
 
@@ -77,30 +79,10 @@ def split_hand(faces: np.ndarray, skin_weights: np.ndarray, joint_bones: np.ndar
     fingers = []
     for f in range(5):
         sub = faces[in_finger & (corner[:, 0] == f)]
-        fingers.append(Part(f"finger{f}", sub, tuple(_boundary_loops(sub)), np.unique(sub)))
+        fingers.append(Part(f"finger{f}", sub, tuple(boundary_loops(sub)), np.unique(sub)))
     palm_faces = faces[~in_finger]
-    palm = Part("palm", palm_faces, tuple(_boundary_loops(palm_faces)), np.unique(palm_faces))
+    palm = Part("palm", palm_faces, tuple(boundary_loops(palm_faces)), np.unique(palm_faces))
     return HandParts(tuple(fingers), palm, segment_of_bone[owner])
-
-
-def _boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
-    """The open boundary of a triangle set as ordered vertex loops (each edge used once)."""
-    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    key = {tuple(e) for e in directed}
-    boundary = [tuple(e) for e in directed if (e[1], e[0]) not in key]
-    # A boundary edge (a, b) runs along the set's orientation; the cap must run the other way.
-    nxt = {b: a for a, b in boundary}
-    loops, seen = [], set()
-    for start in nxt:
-        if start in seen:
-            continue
-        loop, v = [], start
-        while v not in seen:
-            seen.add(v)
-            loop.append(v)
-            v = nxt[v]
-        loops.append(np.asarray(loop, np.int64))
-    return loops
 
 
 @dataclasses.dataclass(frozen=True)

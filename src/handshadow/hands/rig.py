@@ -197,18 +197,15 @@ def fingertip_vertices(
     return np.asarray(tips, dtype=np.int64)
 
 
-def boundary_loop(faces: np.ndarray) -> np.ndarray:
-    """The longest loop of boundary edges (edges used by one face), ordered so that it runs
-    the same way as the faces beside it. Empty if the mesh is closed."""
+def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """Every loop of boundary edges (edges used by one face), each ordered against the faces
+    beside it (b -> a along a face's edge a -> b), so that a face added outside the loop, or a
+    fan that closes it, runs the same way as the mesh. Empty if the mesh is closed."""
     f = np.asarray(faces)
     directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
     undirected = np.sort(directed, axis=1)
     _, inverse, counts = np.unique(undirected, axis=0, return_inverse=True, return_counts=True)
     boundary = directed[counts[inverse.ravel()] == 1]
-    if len(boundary) == 0:
-        return np.zeros(0, dtype=np.int64)
-    # Faces run a -> b along a boundary edge; walk the loop backwards (b -> a) so that the
-    # loop's order matches a face added outside it.
     nxt = {int(b): int(a) for a, b in boundary}
     loops, seen = [], set()
     for start in nxt:
@@ -219,8 +216,14 @@ def boundary_loop(faces: np.ndarray) -> np.ndarray:
             seen.add(v)
             loop.append(v)
             v = nxt.get(v, start)
-        loops.append(loop)
-    return np.asarray(max(loops, key=len), dtype=np.int64)
+        loops.append(np.asarray(loop, dtype=np.int64))
+    return loops
+
+
+def boundary_loop(faces: np.ndarray) -> np.ndarray:
+    """The longest of :func:`boundary_loops`; empty if the mesh is closed."""
+    loops = boundary_loops(faces)
+    return max(loops, key=len) if loops else np.zeros(0, dtype=np.int64)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

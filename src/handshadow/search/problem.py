@@ -21,7 +21,7 @@ from handshadow.hands.model import HandModel, HandOutput
 from handshadow.hands.penetration import Penetration, hand_parts, penetration
 from handshadow.hands.proxies import PenetrationModel, hand_spheres
 from handshadow.losses import TargetMaps
-from handshadow.metrics import ViewScores, iou, score, thin_parts
+from handshadow.metrics import ViewScores, score, thin_parts
 from handshadow.poses import HandPoseBatch, PoseBatch
 from handshadow.render import ShadowRenderer
 from handshadow.scene import Scene
@@ -197,18 +197,6 @@ class Problem:
             ViewScores(tuple(score(m[i], t, th) for m, t, th in zip(masks, targets, thins)), weights)
             for i in range(len(masks[0]))
         ]
-
-    @torch.no_grad()
-    def views_iou(self, poses: PoseBatch, height: int) -> torch.Tensor:
-        """(B,) the views' IoUs at a frame height, weighted by the views' weights (view 0's IoU
-        with one view), on the CPU."""
-        vertices = [o.vertices for o in self.pose(poses.hands)]
-        out = None
-        for k, v in enumerate(self.views):
-            level = self.level(height, k)
-            overlap = iou(level.renderer.render(vertices).mask.cpu(), level.maps.target.cpu())
-            out = overlap if len(self.views) == 1 else (v.weight * overlap if out is None else out + v.weight * overlap)
-        return out
 
     def proxy_depths(self, hands: list[HandPoseBatch], outs: list[HandOutput], light: bool = True) -> torch.Tensor:
         """(B, P) penetration depths of the collision proxies, metres (see PenetrationModel)."""

@@ -23,6 +23,7 @@ from handshadow.hands.rig import FINGERS
 from handshadow.library import library_names, load_library_pose
 from handshadow.metrics import iou
 from handshadow.poses import HandPose, HandPoseBatch, Origin, PoseBatch
+from handshadow.search.atlas import Atlas, shape_descriptor
 
 log = logging.getLogger(__name__)
 MIRROR = torch.diag(torch.tensor([-1.0, 1.0, 1.0]))
@@ -33,6 +34,12 @@ ALIGN_FRAME_PX = 64  # the alignment works on shadows this many pixels high
 ALIGN_ANGLES_DEG = np.arange(0, 360, 20)
 ALIGN_SCALES = np.array([0.8, 1.0, 1.25])  # times the area ratio (a point light; else 1)
 PER_LIBRARY_POSE = 2  # at most this many starts from any one library pose
+ATLAS_ONE = 48  # one hand: atlas entries nearest the target
+ATLAS_FIRST = 12  # two hands: entries nearest the target, as the first hand
+ATLAS_SECOND = 3  # ... and for each, entries nearest what it leaves uncovered, as the other
+HOLE_PENALTY = 0.3  # how much a start that fills the target's holes and notches loses (see start_score)
+ATLAS_SHARE = 0.5  # at most this share of the kept starts from the atlas (the rest stay diverse)
+SECOND_HAND_MIN_SHARE = 0.05  # less left uncovered than this share of the target: cover it all
 ALIGN_WALL_CLEARANCE_M = 0.15  # the alignment's scaling keeps hands this far from the wall
 ALIGN_LAMP_CLEARANCE_M = 0.35  # ... and this far from a point light
 
@@ -269,25 +276,29 @@ def choose_starts(
     rng: np.random.Generator,
     given: PoseBatch | None = None,
     exclude: tuple[str, ...] = (),
+    atlas: Atlas | None = None,
 ) -> PoseBatch:
-    """The search's starts: library poses (but those named in ``exclude``) and ``n_random``
-    random hands, each aligned to the target in 2D, the best ``n_keep`` by IoU (at most
-    PER_LIBRARY_POSE from any one library pose, so the starts stay diverse). ``given`` starts
-    (one PoseBatch, e.g. a morph's other end) are always kept, both as given and aligned.
-    With several views each candidate is aligned to each view's target in turn and judged by
-    the views' IoUs together (weighted).
+    """The search's starts: library poses (but those named in ``exclude``), ``n_random``
+    random hands and, given an atlas, its entries nearest the target (:func:`atlas_starts`),
+    each aligned to the target in 2D, the best ``n_keep`` by IoU (at most PER_LIBRARY_POSE
+    from any one library pose and ATLAS_SHARE from the atlas, so the starts stay diverse). ``given`` starts (one PoseBatch,
+    e.g. a morph's other end) are always kept, both as given and aligned.
+    With several views each candidate is aligned to each view's target in turn and judged in
+    every view (:func:`views_start_score`); the atlas answers view 0's target.
     problem: a search.problem.Problem; returns a PoseBatch on its device, with origins."""
 
     parts = [
         library_starts(len(sides), sides, exclude=exclude),
         random_starts(n_random, sides, problem.limits, rng),
     ]
+    if atlas is not None:
+        parts.append(atlas_starts(atlas, problem.level(ALIGN_FRAME_PX).maps.target.cpu(), sides, problem.scene))
     if given is not None:
         parts.append(given.detach().to("cpu").with_origins([Origin("given")] * given.batch))
     cand = PoseBatch.cat(parts).to(problem.device)
     # Aligned to each view in turn (view 0's first), judged in every view (weighted).
     moved = PoseBatch.cat([align_to_view(problem, cand, k) for k in range(len(problem.views))])
-    overlap = problem.views_iou(moved, ALIGN_FRAME_PX)
+    overlap = views_start_score(problem, moved)
     order = torch.argsort(overlap, descending=True).tolist()
     picked = list(range(cand.batch - given.batch, cand.batch)) if given is not None else []  # aligned
     per_pose: dict[str, int] = {}
@@ -297,14 +308,95 @@ def choose_starts(
         if i in picked:
             continue
         o = moved.origins[i]
-        if o.kind == "library":
-            if per_pose.get(o.name, 0) >= PER_LIBRARY_POSE:
+        source = o.name if o.kind == "library" else o.kind if o.kind == "atlas" else None
+        cap = PER_LIBRARY_POSE if o.kind == "library" else round(ATLAS_SHARE * n_keep)
+        if source is not None:
+            if per_pose.get(source, 0) >= cap:
                 continue
-            per_pose[o.name] = per_pose.get(o.name, 0) + 1
+            per_pose[source] = per_pose.get(source, 0) + 1
         picked.append(i)
     log.info("starts: %s", ", ".join(f"{moved.origins[i]} {float(overlap[i]):.2f}" for i in picked[:8]))
     chosen = moved.select(picked)
     return PoseBatch.cat([cand.select(slice(cand.batch - given.batch, None)), chosen]) if given is not None else chosen
+
+
+def start_score(shadows: torch.Tensor, maps) -> torch.Tensor:
+    """(B,) how good a start is: its IoU with the target, less HOLE_PENALTY times the share of
+    the target's holes and narrow notches (losses.notches, graded) that it fills; a shadow
+    that closes the counter of a letter rarely opens it again. shadows (B, H, W) in [0, 1];
+    maps: the target's maps (losses.TargetMaps) at that resolution."""
+    target, notches = maps.target.cpu(), maps.notches.cpu()
+    score = iou(shadows, target)
+    if float(notches.sum()) > 0:
+        score = score - HOLE_PENALTY * (shadows * notches).sum((1, 2)) / notches.sum()
+    return score
+
+
+def atlas_starts(atlas: Atlas, target: torch.Tensor, sides: list[str], scene) -> PoseBatch:
+    """Starts from the atlas for a target (H, W) at ALIGN_FRAME_PX: with one hand, the
+    ATLAS_ONE entries nearest the target's shape; with two, for each of the ATLAS_FIRST
+    nearest (as the first hand, aligned to the target) the ATLAS_SECOND nearest what it leaves
+    uncovered (as the other hand, aligned to that, PAIR_DEPTH_OFFSET_M nearer the wall).
+    Origins are ('atlas', entry numbers)."""
+    if tuple(target.shape) != atlas.masks.shape[1:]:
+        return _no_starts(sides)  # a frame of another shape than the atlas's
+    first_side = sides[0]
+    nearest = atlas.nearest(shape_descriptor(target[None])[0].numpy(), ATLAS_ONE if len(sides) == 1 else ATLAS_FIRST)
+    first = _atlas_hands(atlas, nearest, first_side)
+    if len(sides) == 1:
+        return PoseBatch([first], [Origin("atlas", str(i)) for i in nearest])
+    pivot = pivot_pixel(scene, target.shape[0])
+    masks = _atlas_masks(atlas, nearest, first_side)
+    angle, scale, shift, _ = similarity_align(masks, target, pivot, ALIGN_ANGLES_DEG, ALIGN_SCALES)
+    placed = apply_similarity(PoseBatch([first]), angle, scale, shift, scene, target.shape[0])
+    covered = _warp_each(masks, angle, scale, shift, pivot)
+    rights, lefts, origins = [], [], []
+    for k, i in enumerate(nearest):
+        rest = (target * (1 - covered[k])).clamp(min=0)
+        if float(rest.sum()) < SECOND_HAND_MIN_SHARE * float(target.sum()):
+            rest = target  # the first hand covers it: the other hand goes over the whole shape
+        second_idx = atlas.nearest(shape_descriptor(rest[None])[0].numpy(), ATLAS_SECOND)
+        second_masks = _atlas_masks(atlas, second_idx, sides[1])
+        a2, s2, t2, _ = similarity_align(second_masks, rest, pivot, ALIGN_ANGLES_DEG, ALIGN_SCALES)
+        second = apply_similarity(
+            PoseBatch([_atlas_hands(atlas, second_idx, sides[1])]), a2, s2, t2, scene, target.shape[0]
+        )
+        rights.append(placed.hands[0].select([k] * len(second_idx)))
+        lefts.append(second.hands[0].moved(torch.tensor([0.0, 0.0, -PAIR_DEPTH_OFFSET_M])))
+        origins += [Origin("atlas", f"{i}+{j}") for j in second_idx]
+    return PoseBatch([HandPoseBatch.cat(rights), HandPoseBatch.cat(lefts)], origins)
+
+
+def _no_starts(sides) -> PoseBatch:
+    empty = HandPoseBatch(torch.zeros(0, 15, 3), torch.zeros(0, 3, 3), torch.zeros(0, 3), torch.zeros(0, 2))
+    return PoseBatch([empty for _ in sides], [])
+
+
+def _atlas_hands(atlas: Atlas, idx: np.ndarray, side: str) -> HandPoseBatch:
+    """Entries idx as the given side's hand (the atlas holds right hands; a left one is the
+    mirror image)."""
+    hands = atlas.poses.select(torch.as_tensor(idx))
+    if side == "right":
+        return hands
+    m = MIRROR.to(hands.rotation.dtype)
+    return HandPoseBatch(hands.pose_rad, m @ hands.rotation @ m, hands.translation @ m.T, hands.wrist_rad)
+
+
+def _atlas_masks(atlas: Atlas, idx: np.ndarray, side: str) -> torch.Tensor:
+    """(k, H, W) float shadows of entries idx as the given side's hand (mirrored for the left:
+    the frame is centred on the lamp's foot)."""
+    masks = torch.as_tensor(atlas.masks[idx], dtype=torch.float32)
+    return masks if side == "right" else torch.flip(masks, [2])
+
+
+def _warp_each(masks, angle, scale, shift, pivot) -> torch.Tensor:
+    """Each mask (B, H, W) under its own similarity."""
+    out = []
+    for k in range(masks.shape[0]):
+        a = float(angle[k])
+        rot = torch.tensor([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]], dtype=masks.dtype)
+        out.append(_warp(masks[k : k + 1], rot, scale[k : k + 1], shift[k : k + 1], pivot))
+    return torch.cat(out)
 
 
 def align_to_view(problem, cand: PoseBatch, view: int = 0) -> PoseBatch:
@@ -323,3 +415,15 @@ def align_to_view(problem, cand: PoseBatch, view: int = 0) -> PoseBatch:
     if not point:
         scale = torch.ones_like(scale)
     return apply_similarity(cand.to("cpu"), angle, scale, shift, scene, ALIGN_FRAME_PX).to(problem.device)
+
+
+def views_start_score(problem, poses: PoseBatch) -> torch.Tensor:
+    """(B,) :func:`start_score` at ALIGN_FRAME_PX in every view of the problem, weighted by
+    the views' weights (view 0's alone with one view)."""
+    scores = [
+        start_score(problem.shadows(poses, ALIGN_FRAME_PX, k).cpu(), problem.level(ALIGN_FRAME_PX, k).maps)
+        for k in range(len(problem.views))
+    ]
+    if len(scores) == 1:
+        return scores[0]
+    return sum(v.weight * s for v, s in zip(problem.views, scores))

@@ -1,0 +1,147 @@
+"""Recovery benchmark: shadows that hands made, fitted back. It measures the search alone:
+every target is the exact shadow of a random, anatomically valid, performable pose of two
+hands (with forearms, or without with --no-forearm) at a random place between lamp and wall.
+
+    python bench/recover.py [--n 40] [--seed 2026] [--no-forearm] [--quality default] [--out out/recover]
+
+The poses come from their own generator (uniform joint angles within the limits, any
+orientation whose forearm leads back toward the lamp, hands within a person's reach), never
+from the search's starts. A pose is kept only if it is performable (no vertex more than 3 mm
+inside other flesh, docs/performing.md) and its shadow lies well inside the frame. Each target
+is fitted with the defaults (FitConfig(), hands auto) and judged by the success test.
+Prints one row per target and
+SUMMARY n=<n> success=<share> performable_success=<share> median_iou=<x> median_s=<x>
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import torch
+
+from handshadow.export.images import mask_image
+from handshadow.fit import FitConfig, fit_frame
+from handshadow.hands.limits import joint_limits_deg, wrist_limits_deg
+from handshadow.hands.penetration import penetration
+from handshadow.hands.posed import cast_shadow
+from handshadow.poses import HandPose, PosedScene
+from handshadow.scene import Scene
+
+SIZE = 256
+DEPTH_M = (0.85, 1.25)  # wrist distance from the lamp
+ARM_CONE_DEG = 70.0  # forearms within this angle of the ray back toward the lamp
+MAX_WRIST_GAP_M = 0.3
+AREA_SHARE = (0.04, 0.45)  # the shadow's share of the frame
+EDGE_PX = 3  # the hands' shadow keeps this far from the frame's border (forearms may leave)
+
+
+def random_hand(side: str, rng: np.random.Generator, centre: np.ndarray) -> HandPose:
+    """A hand with joint angles uniform within the anatomical limits (bends skewed toward
+    straight, as people hold shadow hands), the wrist anywhere within its limits, the forearm
+    within ARM_CONE_DEG of the ray back toward the lamp, rolled any way."""
+    lim = joint_limits_deg("anatomical", side)
+    pose = rng.uniform(lim[..., 0], lim[..., 1])
+    pose[:, 2] = lim[:, 2, 0] + (lim[:, 2, 1] - lim[:, 2, 0]) * rng.uniform(0, 1, 15) ** 1.5
+    wrist = rng.uniform(*wrist_limits_deg().T)
+    tilt = np.radians(ARM_CONE_DEG) * np.sqrt(rng.uniform())
+    azimuth = rng.uniform(0, 2 * np.pi)
+    arm = np.array([np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), np.cos(tilt)])
+    fingers = -arm + rng.normal(0, 0.5, 3)  # the hand frame's +y, roughly away from the forearm
+    fingers /= np.linalg.norm(fingers)
+    back = rng.normal(size=3)
+    back -= fingers * (back @ fingers)
+    back /= np.linalg.norm(back)
+    rotation = np.stack([np.cross(fingers, back), fingers, back], 1)
+    return HandPose(side, "anny", {}, pose, rotation, centre, wrist)
+
+
+def random_target(rng: np.random.Generator, forearm: bool, tries: int = 200) -> tuple[PosedScene, np.ndarray]:
+    """A performable two-hand pose whose shadow lies well inside the frame, and the shadow."""
+    scene = Scene.default(SIZE, SIZE)
+    lamp = np.asarray(scene.light.position)
+    for _ in range(tries):
+        depth = rng.uniform(*DEPTH_M)
+        middle = lamp + np.array([rng.normal(0, 0.04), rng.normal(0, 0.04), -depth])
+        offset = rng.normal(0, 1, 3) * np.array([1.0, 0.6, 0.3])
+        offset *= rng.uniform(0.06, MAX_WRIST_GAP_M / 2) / np.linalg.norm(offset)
+        hands = (random_hand("right", rng, middle + offset), random_hand("left", rng, middle - offset))
+        posed = PosedScene(hands, scene, forearm)
+        try:
+            meshes, mask = cast_shadow(posed)
+        except Exception:  # through the wall or the lamp: draw again
+            continue
+        shadow = mask > 0.5
+        if not AREA_SHARE[0] <= shadow.mean() <= AREA_SHARE[1]:
+            continue
+        hands_xy = scene.project(torch.as_tensor(np.concatenate([m.keypoints for m in meshes])))[0].numpy()
+        if hands_xy.min() < EDGE_PX or hands_xy.max() > SIZE - EDGE_PX:
+            continue
+        if not penetration([m.vertices for m in meshes], [m.faces for m in meshes]).performable():
+            continue
+        return posed, shadow
+    raise RuntimeError("no performable pose found; widen the generator's ranges")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=40)
+    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--no-forearm", action="store_true")
+    parser.add_argument("--quality", default="default", choices=["fast", "default", "best"])
+    parser.add_argument("--out", default="out/recover")
+    args = parser.parse_args()
+    out = Path(args.out)
+    (out / "targets").mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(args.seed)
+    forearm = not args.no_forearm
+    print(f"{args.n} random two-hand poses, forearm={forearm}, seed={args.seed}, quality={args.quality}")
+    print(
+        f"{'target':10s} {'IoU':>6s} {'HD95':>6s} {'thin':>5s} {'ok':>3s} {'pen':>5s} {'hold':>4s} {'hands':>5s} {'s':>6s}"
+    )
+    rows = []
+    for k in range(args.n):
+        truth, target = random_target(rng, forearm)
+        name = f"pose{k:02d}"
+        iio.imwrite(out / "targets" / f"{name}.png", mask_image(target))
+        (out / "targets" / f"{name}.json").write_text(json.dumps(truth.to_json(), indent=1))
+        t0 = time.perf_counter()
+        result = fit_frame(target, FitConfig(size=SIZE, quality=args.quality, forearm=forearm))
+        seconds = time.perf_counter() - t0
+        s = result.score
+        rows.append(
+            dict(
+                name=name,
+                iou=s.iou,
+                hd95=s.hd95,
+                thin=s.thin_recall,
+                shadow_success=s.success,
+                penetration_mm=result.penetration.deepest_mm,
+                success=result.success,
+                hands=len(result.posed.hands),
+                seconds=seconds,
+            )
+        )
+        r = rows[-1]
+        print(
+            f"{name:10s} {s.iou:6.3f} {s.hd95:6.3f} {s.thin_recall:5.2f} {'yes' if s.success else 'no':>3s} "
+            f"{r['penetration_mm']:5.1f} {'yes' if result.performable else 'no':>4s} {r['hands']:5d} {seconds:6.1f}",
+            flush=True,
+        )
+        (out / "rows.json").write_text(json.dumps(rows, indent=1))
+    n = len(rows)
+    print(
+        f"SUMMARY n={n} success={sum(r['shadow_success'] for r in rows) / n:.3f} "
+        f"performable_success={sum(r['success'] for r in rows) / n:.3f} "
+        f"median_iou={statistics.median(r['iou'] for r in rows):.3f} "
+        f"median_s={statistics.median(r['seconds'] for r in rows):.1f}"
+    )
+
+
+if __name__ == "__main__":
+    main()

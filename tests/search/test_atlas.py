@@ -1,0 +1,38 @@
+"""The shadow atlas: its descriptor ignores turning, mirroring and scale; an entry's own
+shadow finds the entry; starts come from it for one and two hands."""
+
+import numpy as np
+import torch
+
+from handshadow.search.atlas import load_atlas, shape_descriptor
+
+
+def _blob(size=64):
+    yy, xx = np.mgrid[:size, :size]
+    m = ((yy - 34) ** 2 / 14**2 + (xx - 30) ** 2 / 9**2) <= 1  # an ellipse
+    m[10:24, 28:31] = True  # and an ear
+    return torch.as_tensor(m, dtype=torch.float32)
+
+
+def test_the_descriptor_ignores_turns_mirrors_and_size_but_not_shape():
+    m = _blob()
+    d = shape_descriptor(torch.stack([m, torch.flip(m, [1]), torch.rot90(m, 1, [0, 1])]))
+    assert torch.allclose(d[0], d[1], atol=1e-5) and torch.allclose(d[0], d[2], atol=1e-5)
+    big = torch.nn.functional.interpolate(m[None, None], scale_factor=2, mode="nearest")[0, 0, 32:96, 32:96]
+    assert float((shape_descriptor(big[None])[0] - d[0]).norm()) < 0.1
+    no_ear = m.clone()
+    no_ear[10:24, 28:31] = 0
+    # Losing the ear moves it farther than doubling the size (pixels at 64 px blur both).
+    assert float((shape_descriptor(no_ear[None])[0] - d[0]).norm()) > float(
+        (shape_descriptor(big[None])[0] - d[0]).norm()
+    )
+
+
+def test_an_entrys_own_shadow_retrieves_it():
+    atlas = load_atlas()  # built into the cache on first use
+    assert len(atlas.masks) > 1000 and atlas.descriptors.shape[0] == len(atlas.masks)
+    rng = np.random.default_rng(3)
+    for i in rng.choice(len(atlas.masks), 5, replace=False):
+        turned = torch.rot90(torch.as_tensor(atlas.masks[i], dtype=torch.float32), 1, [0, 1])
+        nearest = atlas.nearest(shape_descriptor(turned[None])[0].numpy(), 3)
+        assert i in nearest
