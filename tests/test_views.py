@@ -234,3 +234,10 @@ def test_a_two_view_fit_folder_has_every_view(two_view_fit, tmp_path):
         shadow = iio.imread(out / f"shadow_{k}.png") < 128
         assert (recompute_shadow(out, view) != shadow).sum() <= 2, k
         assert (tmp_path / "again" / f"shadow_{k}.png").read_bytes() == (out / f"shadow_{k}.png").read_bytes()
+
+
+def test_printing_a_two_view_result_is_refused_in_one_line(two_view_render, capsys):
+    assert main(["print", str(two_view_render)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("handshadow: error: ") and "\n" not in err and "several views" in err
+    assert not list(two_view_render.glob("print*"))

@@ -283,8 +283,10 @@ def choose_starts(
     each aligned to the target in 2D, the best ``n_keep`` by IoU (at most PER_LIBRARY_POSE
     from any one library pose and ATLAS_SHARE from the atlas, so the starts stay diverse). ``given`` starts (one PoseBatch,
     e.g. a morph's other end) are always kept, both as given and aligned.
-    With several views each candidate is aligned to each view's target in turn and judged in
-    every view (:func:`views_start_score`); the atlas answers view 0's target.
+    With several views each candidate is also turned about the vertical (:func:`view_turns_rad`),
+    each is aligned to each view's target in turn and judged in every view
+    (:func:`views_start_score`); the atlas answers view 0's target.
+
     problem: a search.problem.Problem; returns a PoseBatch on its device, with origins."""
 
     parts = [
@@ -293,6 +295,9 @@ def choose_starts(
     ]
     if atlas is not None:
         parts.append(atlas_starts(atlas, problem.level(ALIGN_FRAME_PX).maps.target.cpu(), sides, problem.scene))
+    turns = view_turns_rad(problem)
+    if len(turns) > 1:  # several views: each candidate also turned toward the other lamps
+        parts = [turned_about_vertical(PoseBatch.cat(parts), a) for a in turns]
     if given is not None:
         parts.append(given.detach().to("cpu").with_origins([Origin("given")] * given.batch))
     cand = PoseBatch.cat(parts).to(problem.device)
@@ -427,3 +432,31 @@ def views_start_score(problem, poses: PoseBatch) -> torch.Tensor:
     if len(scores) == 1:
         return scores[0]
     return sum(v.weight * s for v, s in zip(problem.views, scores))
+
+
+def view_turns_rad(problem) -> list[float]:
+    """The turns about the vertical (+y, radians) tried on every candidate: none with one
+    view; with more, also half and all of each further view's turn from view 0. Candidates
+    are mostly held toward view 0's lamp, their forearms hidden behind the hands; turned by
+    half, the forearms point between the lamps, where a performer lit by both stands."""
+    turns = [0.0]
+    n0 = np.asarray(problem.views[0].scene.wall.normal, float)
+    for view in problem.views[1:]:
+        n = np.asarray(view.scene.wall.normal, float)
+        angle = math.atan2(float(np.cross(n0, n)[1]), float(n0 @ n))
+        turns += [angle / 2, angle]
+    return turns
+
+
+def turned_about_vertical(poses: PoseBatch, angle_rad: float) -> PoseBatch:
+    """Each hypothesis turned by angle_rad about the vertical (+y) through its wrists' mean
+    (positive: from +z toward +x, as scene.Scene.turned)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    dtype = poses.hands[0].rotation.dtype
+    rot = torch.tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]], dtype=dtype, device=poses.hands[0].rotation.device)
+    centre = torch.stack([h.translation for h in poses.hands]).mean(0)
+    hands = [
+        HandPoseBatch(h.pose_rad, rot @ h.rotation, (h.translation - centre) @ rot.T + centre, h.wrist_rad)
+        for h in poses.hands
+    ]
+    return PoseBatch(hands, poses.origins)
