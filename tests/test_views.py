@@ -1,6 +1,8 @@
 """Several views of one pose: the turned scene, scene.json as a list of views, rendering every
 view, single-view files from before, and bad view options."""
 
+import contextlib
+import io
 import json
 import math
 import subprocess
@@ -183,39 +185,42 @@ def two_view_fit(tmp_path_factory):
     starts, and its forearm leads back from both walls), fitted from the two images."""
     from handshadow.fit import FitConfig, make_problem
     from handshadow.library import load_library_pose
-    from handshadow.pipeline import fit_to_folder
     from handshadow.poses import HandPoseBatch, PoseBatch
     from handshadow.search import ViewTarget, separate
 
     folder = tmp_path_factory.mktemp("fit_views")
     truth = load_library_pose("rabbit")
     front, side = default_views(SIZE, SIZE, "point", (0.0, 90.0))
-    config = FitConfig(hands="1", size=SIZE, quality="fast", seed=0)
     blank = np.zeros((SIZE, SIZE), bool)
-    problem = make_problem(blank, front, ["right"], config, None, [ViewTarget(side, blank)])
+    problem = make_problem(
+        blank, front, ["right"], FitConfig(hands="1", size=SIZE, device="cpu"), None, [ViewTarget(side, blank)]
+    )
     pose = separate(problem, PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands]))
     targets = [m[0] for m in problem.view_masks(pose)]
     for k, t in enumerate(targets):
         iio.imwrite(folder / f"view{k}.png", np.where(t, 0, 255).astype(np.uint8))
-    out, result, lines = fit_to_folder(
-        [str(folder / "view0.png"), str(folder / "view1.png")], folder / "out", config, show_progress=False
-    )
-    return out, result, targets, lines
+    out, printed = folder / "out", io.StringIO()
+    args = ["fit", str(folder / "view0.png"), str(folder / "view1.png"), "--view-angle", "90", "--hands", "1"]
+    with contextlib.redirect_stdout(printed):
+        assert main([*args, "--size", str(SIZE), "--quality", "fast", "--device", "cpu", "--out", str(out)]) == 0
+    return out, json.loads((out / "pose.json").read_text()), targets, printed.getvalue().splitlines()
 
 
 def test_a_pose_rendered_in_two_views_comes_back_in_both(two_view_fit):
-    out, result, targets, _ = two_view_fit
+    out, pose, targets, printed = two_view_fit
     for k, target in enumerate(targets):
         shadow = iio.imread(out / f"shadow_{k}.png") < 128
         inter, union = (shadow & target).sum(), (shadow | target).sum()
         assert inter / union >= 0.95, (k, inter / union)
+        assert pose["fit"]["views"][k]["iou"] == pytest.approx(inter / union, abs=1e-4)
         assert np.array_equal(iio.imread(out / f"target_{k}.png") < 128, target)
-    assert result.success and result.performable
-    assert all(result.posed.fit["forearms_lead_back"])
+    assert pose["fit"]["success"] and pose["fit"]["performable"] and all(pose["fit"]["forearms_lead_back"])
+    assert printed[0].startswith("success")
 
 
 def test_a_two_view_fit_folder_has_every_view(two_view_fit, tmp_path):
-    out, result, _, lines = two_view_fit
+    out, _, _, lines = two_view_fit
+
     names = {p.name for p in out.iterdir()}
     per_view = {f"{stem}_{k}.png" for stem in ("target", "shadow", "overlay") for k in range(2)}
     assert per_view | {"scene.json", "pose.json", "right.obj", "hands.glb", "scene.png", "guide.png"} <= names

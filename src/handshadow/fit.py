@@ -468,17 +468,17 @@ def make_problem(
     more_views: Sequence[ViewTarget] = (),
 ) -> Problem:
     """The search's context for a target frame (H, W) bool: the config's hand model for each
-    side ('right', 'left') and their joint limits (float32, on the config's device); further
-    views of the same pose when given (search.Problem)."""
+    side ('right', 'left') and their joint limits (float32, on the config's device, 'auto'
+    resolved); further views of the same pose when given (search.Problem)."""
     dtype = torch.float32
+    device = resolve_device(config.device)
     models = [
-        load_hand(
-            config.hand_model, s, mano_dir=config.mano_dir, forearm=config.forearm, dtype=dtype, device=config.device
-        )
+        load_hand(config.hand_model, s, mano_dir=config.mano_dir, forearm=config.forearm, dtype=dtype, device=device)
         for s in sides
     ]
-    limits = [JointLimits.preset(config.limits, s, dtype=dtype, device=config.device) for s in sides]
+    limits = [JointLimits.preset(config.limits, s, dtype=dtype, device=device) for s in sides]
     if anchor is not None:
-        anchor = anchor.to(config.device)
+        anchor = anchor.to(device)
+
     reach = Reach().for_performers(config.performers)
     return Problem(scene, target, models, limits, anchor=anchor, reach=reach, more_views=more_views)

@@ -24,8 +24,10 @@ def _dog():
 
 def test_two_views_of_one_scene_weigh_as_one_and_keep_the_rules_twice():
     target, scene, poses = _dog()
-    one = make_problem(target, scene, ["right"], FitConfig(size=SIZE))
-    two = make_problem(target, scene, ["right"], FitConfig(size=SIZE), None, [ViewTarget(scene, target, 3.0)])
+    one = make_problem(target, scene, ["right"], FitConfig(size=SIZE, device="cpu"))
+    two = make_problem(
+        target, scene, ["right"], FitConfig(size=SIZE, device="cpu"), None, [ViewTarget(scene, target, 3.0)]
+    )
     assert [v.weight for v in two.views] == [0.25, 0.75]  # relative weights, normalised
     single, shadow = objective(one, poses.hands, STAGE)
     terms, shadows = view_objective(two, poses.hands, STAGE)
@@ -44,9 +46,13 @@ def test_two_views_of_one_scene_weigh_as_one_and_keep_the_rules_twice():
 def test_a_second_view_sees_what_the_first_cannot():
     target, scene, poses = _dog()
     front, side = default_views(SIZE, SIZE, "point", (0.0, 90.0))
-    side_target = make_problem(target, front, ["right"], FitConfig(size=SIZE), None, [ViewTarget(side, target)])
+    side_target = make_problem(
+        target, front, ["right"], FitConfig(size=SIZE, device="cpu"), None, [ViewTarget(side, target)]
+    )
     side_target = side_target.view_masks(poses.item(0))[1][0]
-    problem = make_problem(target, front, ["right"], FitConfig(size=SIZE), None, [ViewTarget(side, side_target)])
+    problem = make_problem(
+        target, front, ["right"], FitConfig(size=SIZE, device="cpu"), None, [ViewTarget(side, side_target)]
+    )
     # 5 cm along view 0's lamp axis: view 0's shadow barely changes, view 1's moves.
     deeper = PoseBatch([h.moved(torch.tensor([0.0, 0.0, 0.05])) for h in poses.item(0).hands])
     near, far = problem.scores(PoseBatch.cat([poses.item(0), deeper]))
@@ -58,7 +64,9 @@ def test_a_second_view_sees_what_the_first_cannot():
 def test_hands_too_near_the_second_wall_are_moved_off_it():
     target, _, poses = _dog()
     front, side = default_views(SIZE, SIZE, "point", (0.0, 90.0))
-    problem = make_problem(target, front, ["right"], FitConfig(size=SIZE), None, [ViewTarget(side, target)])
+    problem = make_problem(
+        target, front, ["right"], FitConfig(size=SIZE, device="cpu"), None, [ViewTarget(side, target)]
+    )
     near_wall = PoseBatch([h.moved(torch.tensor([-0.9, 0.0, 0.0])) for h in poses.item(0).hands])  # x = -0.95
     kept = keep_between_light_and_wall(problem, near_wall)
     vertices = torch.cat([o.vertices[0] for o in problem.pose(kept.hands)])

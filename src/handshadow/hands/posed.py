@@ -81,4 +81,12 @@ def cast_shadow(posed: PosedScene, mano_dir: str | None = None) -> tuple[list[Po
 def cast_shadows(posed: PosedScene, mano_dir: str | None = None) -> tuple[list[PosedMesh], list[np.ndarray]]:
     """The meshes of a pose file and their exact shadow (H, W) float in each of its views."""
     meshes = pose_meshes(posed, mano_dir)
-    return meshes, [mesh_shadow(scene, meshes) for scene in posed.views]
+    if len(posed.views) == 1:
+        return meshes, [mesh_shadow(posed.scene, meshes)]
+    masks = []
+    for k, scene in enumerate(posed.views):
+        try:
+            masks.append(mesh_shadow(scene, meshes))
+        except PlacementError as exc:
+            raise PlacementError(f"view {k}: {exc}") from None
+    return meshes, masks
