@@ -58,6 +58,10 @@ MAX_VIEWS = 2  # targets one pose may answer: today's lamp and wall, and one tur
 # slowly: a last exact stage at a small rate, at full resolution (schedule sets height and steps).
 VIEWS_SETTLE = Stage(height=0, blur_px=0, attract_px=2, steps=0, keep=1, lr_scale=0.1, skeleton=0.0)
 VIEWS_SETTLE_STEPS = {"fast": 60, "default": 80, "best": 100}
+# Several shadows are seldom all met by the search alone: twice the polish's base rounds (a
+# round never hands back worse, and costs a few seconds).
+VIEWS_POLISH_ROUNDS = {"fast": (2, 0), "default": (4, 4), "best": (6, 6)}
+
 
 
 @dataclasses.dataclass(frozen=True)
@@ -320,7 +324,8 @@ def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: flo
     try:  # the separation always runs to its end after a stopped search: a result must not penetrate
         poses = separate(problem, res.poses, stop=None if res.interrupted else stop)
         if not res.interrupted:
-            rounds, near_rounds = POLISH_ROUNDS[config.quality]
+            views = len(problem.views)
+            rounds, near_rounds = (POLISH_ROUNDS if views == 1 else VIEWS_POLISH_ROUNDS)[config.quality]
             generator = torch.Generator(device="cpu").manual_seed(config.seed)
             poses = polish(problem, poses, rounds, near_rounds, stop=polish_stop, generator=generator)
     except Interrupted as halt:  # Ctrl-C, stop or the time limit in the finishing steps: keep what they reached
