@@ -45,8 +45,8 @@ RECOVERY_RULE = (
     " flesh, the hands' shadows keep 3 px inside both frames and each covers 4 to 45 % of its frame"
 )
 ART_RULE = (
-    "the HSP targets sorted by name; pair i (i = 0..n-1) fronts the file at index"
-    " round(i * N / n) and sides the file half the list further on (index + N // 2, mod N)"
+    "the N HSP targets sorted by name; 2n of them evenly spread (index round(j * N / 2n),"
+    " j = 0..2n-1); pair i fronts the i-th and sides the (n + i)-th, half the list further on"
 )
 MAX_DRAWS = 200
 TIME_BAR = 3.0
@@ -137,9 +137,9 @@ def _keeps_the_rules(problem, poses: PoseBatch) -> bool:
 def art_pairs(folder: Path, n: int) -> list[tuple[Path, Path]]:
     """ART_RULE: n (front, side) pairs of the folder's images, sorted by name."""
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".png")
-    count = len(files)
-    fronts = [round(i * count / n) for i in range(n)]
-    return [(files[i], files[(i + count // 2) % count]) for i in fronts]
+    spread = [files[round(j * len(files) / (2 * n))] for j in range(2 * n)]
+    return list(zip(spread[:n], spread[n:]))
+
 
 
 def run(kind: str, name: str, targets: list[np.ndarray], config: FitConfig) -> dict:
