@@ -41,10 +41,11 @@ AREA_SHARE = (0.04, 0.45)  # the shadow's share of the frame
 EDGE_PX = 3  # the hands' shadow keeps this far from the frame's border (forearms may leave)
 
 
-def random_hand(side: str, rng: np.random.Generator, centre: np.ndarray) -> HandPose:
+def random_hand(side: str, rng: np.random.Generator, centre: np.ndarray, back: np.ndarray | None = None) -> HandPose:
     """A hand with joint angles uniform within the anatomical limits (bends skewed toward
     straight, as people hold shadow hands), the wrist anywhere within its limits, the forearm
-    within ARM_CONE_DEG of the ray back toward the lamp, rolled any way."""
+    within ARM_CONE_DEG of the ray back toward the lamp (or of the unit vector ``back``, e.g.
+    toward a performer between two lamps), rolled any way."""
     lim = joint_limits_deg("anatomical", side)
     pose = rng.uniform(lim[..., 0], lim[..., 1])
     pose[:, 2] = lim[:, 2, 0] + (lim[:, 2, 1] - lim[:, 2, 0]) * rng.uniform(0, 1, 15) ** 1.5
@@ -52,6 +53,8 @@ def random_hand(side: str, rng: np.random.Generator, centre: np.ndarray) -> Hand
     tilt = np.radians(ARM_CONE_DEG) * np.sqrt(rng.uniform())
     azimuth = rng.uniform(0, 2 * np.pi)
     arm = np.array([np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), np.cos(tilt)])
+    if back is not None:
+        arm = _turn_z_to(np.asarray(back, float)) @ arm
     fingers = -arm + rng.normal(0, 0.5, 3)  # the hand frame's +y, roughly away from the forearm
     fingers /= np.linalg.norm(fingers)
     back = rng.normal(size=3)
@@ -59,6 +62,18 @@ def random_hand(side: str, rng: np.random.Generator, centre: np.ndarray) -> Hand
     back /= np.linalg.norm(back)
     rotation = np.stack([np.cross(fingers, back), fingers, back], 1)
     return HandPose(side, "anny", {}, pose, rotation, centre, wrist)
+
+
+def _turn_z_to(axis: np.ndarray) -> np.ndarray:
+    """(3, 3) the rotation that takes +z to the unit vector axis (about their common normal)."""
+    z = np.array([0.0, 0.0, 1.0])
+    normal = np.cross(z, axis)
+    sin, cos = float(np.linalg.norm(normal)), float(z @ axis)
+    if sin < 1e-12:
+        return np.eye(3) if cos > 0 else np.diag([1.0, -1.0, -1.0])
+    k = normal / sin
+    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + sin * cross + (1 - cos) * cross @ cross
 
 
 def random_target(rng: np.random.Generator, forearm: bool, tries: int = 200) -> tuple[PosedScene, np.ndarray]:

@@ -67,3 +67,43 @@ def test_one_iou_for_masks_batches_and_tensors():
     assert torch.equal(t, torch.tensor([0.0, 1.0]))
     soft = torch.as_tensor(a, dtype=torch.float32) * 0.5  # coverage: the soft IoU
     assert float(iou(soft, torch.as_tensor(a))) == 0.5
+
+
+def test_several_views_are_judged_together():
+    from handshadow.metrics import ViewScores, rank_key
+
+    good = FitScore(iou=0.9, boundary_f1=0.9, hd95=0.01, thin_recall=0.9)
+    near = FitScore(iou=0.9, boundary_f1=0.9, hd95=0.035, thin_recall=0.9)
+    bad = FitScore(iou=0.5, boundary_f1=0.5, hd95=0.2, thin_recall=0.2)
+    assert ViewScores((good,), (1.0,)).key() == rank_key(good)  # one view: the single-view key
+    both, one, none = (ViewScores(s, (0.5, 0.5)) for s in ((good, good), (good, bad), (bad, bad)))
+    assert both.success and not one.success and not one.near_miss
+    assert ViewScores((good, near), (0.5, 0.5)).near_miss
+    assert sorted([none, one, both], key=ViewScores.key) == [both, one, none]
+    # A view's weight decides which single success ranks first.
+    front_first = ViewScores((good, bad), (0.8, 0.2))
+    side_first = ViewScores((bad, good), (0.8, 0.2))
+    assert front_first.key() < side_first.key()
+
+
+def test_missing_parts_are_found_where_they_are_and_named_thin():
+    from handshadow.guide import parts_text
+    from handshadow.metrics import thin_parts, uncovered_parts
+
+    target = np.zeros((100, 100), bool)
+    target[40:90, 30:70] = True  # a body
+    target[10:40, 66:70] = True  # an ear, 4 px wide: a thin part, top right
+    shadow = target.copy()
+    shadow[10:40, 66:70] = False  # the ear missed
+    shadow[85:98, 10:30] = True  # a spill at the bottom left
+    shadow[40:90, 30] = False  # a one-pixel sliver along the outline: no part
+    missing = uncovered_parts(target, shadow, target)
+    assert len(missing) == 1 and missing[0].thin
+    assert missing[0].centre[0] > 2 / 3 and missing[0].centre[1] < 1 / 3
+    assert missing[0].share == pytest.approx(120 / target.sum(), rel=0.05)
+    extra = uncovered_parts(shadow, target, target)
+    assert len(extra) == 1 and not extra[0].thin and extra[0].centre[1] > 2 / 3
+    assert thin_parts(target)[20, 68]
+    text = parts_text(missing, extra)
+    assert text.startswith("missing a thin part at the top right") and "extra shadow at the bottom left" in text
+    assert parts_text([], []) == "nothing missing"

@@ -15,12 +15,14 @@ from handshadow.examples import pose_path
 PY = [sys.executable, "-m", "handshadow.cli"]
 
 
-def recompute_shadow(folder) -> np.ndarray:
+def recompute_shadow(folder, scene: dict | None = None) -> np.ndarray:
     """The shadow from scene.json and the OBJ files alone, in numpy, following the contract:
     pixel (i, j) is in shadow when the segment from its centre on the wall to the light (or
-    the ray against a directional light) meets a triangle."""
-    scene = json.loads((folder / "scene.json").read_text())
+    the ray against a directional light) meets a triangle. ``scene``: one view of a
+    scene.json that lists several (default: the folder's scene.json, one view)."""
+    scene = scene if scene is not None else json.loads((folder / "scene.json").read_text())
     im = scene["image"]
+
     w, h = im["width"], im["height"]
     o, u, v = (np.asarray(im[k], float) for k in ("origin", "u", "v"))
     n = np.asarray(scene["wall"]["normal"], float)

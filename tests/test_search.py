@@ -148,7 +148,7 @@ def test_ctrl_c_in_the_polish_hands_back_poses(monkeypatch):
     problem, truth = _problem_and_truth()
     off = _moved(truth)
     calls = {"n": 0}
-    real = finishing.objective
+    real = finishing.view_objective
 
     def interrupted_on_the_third_step(*args, **kwargs):
         calls["n"] += 1
@@ -156,7 +156,7 @@ def test_ctrl_c_in_the_polish_hands_back_poses(monkeypatch):
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(finishing, "objective", interrupted_on_the_third_step)
+    monkeypatch.setattr(finishing, "view_objective", interrupted_on_the_third_step)
     with pytest.raises(Interrupted) as stop:
         polish(problem, off, rounds=1, settings=finishing.Finishing(steps=10, copies=2))
     assert stop.value.poses.batch == 1 and stop.value.poses.hands[0].pose_rad.shape == (1, 15, 3)
@@ -225,13 +225,14 @@ def test_the_stages_rank_by_the_fit_measures():
 
 def _scripted_rounds(monkeypatch, hd95s):
     """Make each polish round return the next HD95 of ``hd95s`` (IoU 0.9, thin 0.9); count them."""
-    from handshadow.metrics import FitScore
+    from handshadow.metrics import FitScore, ViewScores
 
     played = []
 
     def round_(problem, poses, best_score, *args):
         played.append(hd95s[len(played)])
-        return FitScore(iou=0.9, boundary_f1=0.5, hd95=played[-1], thin_recall=0.9), poses
+        return ViewScores((FitScore(iou=0.9, boundary_f1=0.5, hd95=played[-1], thin_recall=0.9),), (1.0,)), poses
+
 
     monkeypatch.setattr(finishing, "polish_round", round_)
     return played

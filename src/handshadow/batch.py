@@ -248,7 +248,6 @@ def fit_task(name: str, source: str, suffix: str, image: bytes, config, invert: 
     import tempfile
 
     import torch  # only to set its thread count
-
     from distributed import get_worker
 
     from handshadow.cli import resolve_device

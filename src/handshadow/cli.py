@@ -8,6 +8,7 @@ targets failed (and the others were fitted) exits with 1.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import sys
 from pathlib import Path
@@ -18,16 +19,18 @@ from handshadow.errors import HandshadowError
 EXIT_FAILED_TARGETS = 1  # batch: every target was tried, some could not be fitted
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
+DEFAULT_VIEW_ANGLE = 90.0  # fit.FitConfig.view_angle_deg
 
 
 def cmd_render(args: argparse.Namespace) -> int:
     from handshadow.posefile import load_pose_file
 
     posed = load_pose_file(examples.pose_path(args.pose), frame=args.frame)  # checked before the heavy imports
-    from handshadow.pipeline import render_to_folder
+    from handshadow.pipeline import render_to_folder, view_name
 
     out = render_to_folder(posed, args.out, force=args.force, mano_dir=args.mano_dir)
-    print(f"wrote {out}/: shadow.png scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in posed.hands))
+    shadows = " ".join(view_name("shadow", k, len(posed.views)) for k in range(len(posed.views)))
+    print(f"wrote {out}/: {shadows} scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in posed.hands))
     return 0
 
 
@@ -51,16 +54,19 @@ def resolve_device(name: str) -> str:
 def cmd_fit(args: argparse.Namespace) -> int:
     from handshadow.export.files import ResultFolder
 
-    out = Path(args.out) if args.out else Path("out") / Path(args.target).stem
+    check_views(args)
+    out = Path(args.out) if args.out else Path("out") / "-".join(Path(t).stem for t in args.target)
     ResultFolder(out, args.force)  # refuse a non-empty folder before any work
-    _check_target(args.target, args.invert)  # bad targets fail fast, before torch loads
+    for target in args.target:  # bad targets fail fast, before torch loads
+        _check_target(target, args.invert)
     config = _fit_config(args)
     from handshadow.pipeline import fit_to_folder
 
+    sources = args.target[0] if len(args.target) == 1 else args.target
     folder, result, lines = fit_to_folder(
-        args.target, out, config, force=args.force, invert=args.invert, show_progress=not args.quiet
+        sources, out, config, force=args.force, invert=args.invert, show_progress=not args.quiet
     )
-    s = result.score
+    s = result.score if len(result.views) == 1 else "every view below"
     if not args.quiet:
         state = "interrupted; best so far" if result.interrupted else ("success" if result.success else "done")
         print(f"{state}: {s}, {result.steps} steps, {result.seconds:.0f} s")
@@ -87,6 +93,39 @@ def performance_lines(result) -> list[str]:
     if not arms.upper_arms_hidden:
         lines.append("an elbow's shadow falls in the picture: your upper arm may show there too")
     return lines
+
+
+MAX_TARGETS = 2  # fit.MAX_VIEWS, checked here before torch loads
+
+
+def check_views(args: argparse.Namespace) -> None:
+    """One-line errors for view options that cannot work: too many targets, --view-angle or
+    --view-weights without a second target, an angle out of range, weights that do not fit."""
+    from handshadow.scene import check_view_angle
+
+    n = len(args.target)
+    if n > MAX_TARGETS:
+        raise HandshadowError(f"give one target, or two targets for two views of one pose (FRONT SIDE); got {n}")
+    if n == 1 and (args.view_angle is not None or args.view_weights is not None):
+        option = "--view-angle" if args.view_angle is not None else "--view-weights"
+        raise HandshadowError(f"{option} needs a second target: handshadow fit FRONT SIDE {option} ...")
+    if n > 1:
+        check_view_angle(args.view_angle if args.view_angle is not None else DEFAULT_VIEW_ANGLE)
+        if args.view_weights is not None:
+            weights = parse_weights(args.view_weights)
+            if len(weights) != n:
+                raise HandshadowError(f"--view-weights needs {n} weights (one per target), got {args.view_weights!r}")
+
+
+def parse_weights(text: str) -> tuple[float, ...]:
+    """'1,0.5' -> (1.0, 0.5); each weight a positive finite number."""
+    try:
+        weights = tuple(float(w) for w in text.split(","))
+    except ValueError:
+        raise HandshadowError(f"--view-weights must be numbers separated by commas, got {text!r}") from None
+    if not all(0 < w < float("inf") for w in weights):
+        raise HandshadowError(f"--view-weights must be positive, got {text!r}")
+    return weights
 
 
 def _check_target(source: str, invert: bool | None = None) -> None:
@@ -122,6 +161,10 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
         quality=args.quality,
         performers=args.performers,
     )
+    if getattr(args, "view_angle", None) is not None:
+        config = dataclasses.replace(config, view_angle_deg=args.view_angle)
+    if getattr(args, "view_weights", None) is not None:
+        config = dataclasses.replace(config, view_weights=parse_weights(args.view_weights))
     if config.hand_model == "mano":
         from handshadow.hands import load_rig
 
@@ -271,8 +314,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frame", type=int, default=0, help="which frame of a poses.json (from interpolate) to render")
     p.set_defaults(func=cmd_render)
 
-    p = sub.add_parser("fit", help="find hand poses whose shadow matches a target image")
-    p.add_argument("target", help="an image file (PNG, JPEG, GIF, BMP) or a built-in example name")
+    p = sub.add_parser("fit", help="find hand poses whose shadow matches a target image (or two, from two lamps)")
+    p.add_argument(
+        "target",
+        nargs="+",
+        help="an image file (PNG, JPEG, GIF, BMP) or a built-in example name; a second target (SIDE) fits"
+        " one pose whose shadow from a second lamp, turned --view-angle about the hands, matches it",
+    )
+    p.add_argument(
+        "--view-angle",
+        type=float,
+        help=f"degrees the second lamp and wall are turned about the hands (default {DEFAULT_VIEW_ANGLE:g};"
+        " 45 to 135 either way, positive to your right)",
+    )
+    p.add_argument("--view-weights", help="one weight per target, e.g. 1,0.5 (default: equal)")
     p.add_argument("--out", help="output folder (default: out/<target name>)")
     _add_fit_options(p)
     p.add_argument(

@@ -4,6 +4,9 @@ output.
 result = fit_frame(target_frame, FitConfig(hands="2"))
 result.posed     # PosedScene (hands + scene + fit info), ready to save or render
 result.shadow    # the exact shadow of exactly what pose.json holds, and result.score its measures
+
+result = fit_frame([front, side], FitConfig(view_angle_deg=90))   # one pose, two shadows
+result.views     # per view (ViewFit): its scene, target, shadow, measures, missing parts
 """
 
 from __future__ import annotations
@@ -11,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import torch
@@ -21,11 +24,11 @@ from handshadow.hands import load_hand
 from handshadow.hands.arms import ArmCheck, check_arms
 from handshadow.hands.limits import JointLimits
 from handshadow.hands.penetration import Penetration, hand_parts, penetration
-from handshadow.hands.posed import PosedMesh, cast_shadow
-from handshadow.metrics import FitScore, iou, score
+from handshadow.hands.posed import PosedMesh, cast_shadows
+from handshadow.metrics import FitScore, Part, iou, score, thin_parts, uncovered_parts
 from handshadow.posefile import parse_pose
 from handshadow.poses import PoseBatch, PosedScene
-from handshadow.scene import Scene
+from handshadow.scene import Scene, check_view_angle, default_views
 from handshadow.search import (
     Interrupted,
     Problem,
@@ -33,6 +36,7 @@ from handshadow.search import (
     Reach,
     SearchResult,
     Stage,
+    ViewTarget,
     keep_between_light_and_wall,
     polish,
     run_stages,
@@ -49,6 +53,15 @@ POLISH_ROUNDS = {"fast": (1, 0), "default": (2, 4), "best": (3, 6)}
 # --hands auto prefers one hand unless two score better by more than this (rank-key blend).
 ONE_HAND_PREFERENCE = 0.02
 CUDA_WIDER = 16  # on a GPU the search keeps this many times the hypotheses (see schedule)
+MAX_VIEWS = 2  # targets one pose may answer: today's lamp and wall, and one turned about the hands
+# With several views each shadow's outline is pulled by the other views too and settles more
+# slowly: a last exact stage at a small rate, at full resolution (schedule sets height and steps).
+VIEWS_SETTLE = Stage(height=0, blur_px=0, attract_px=2, steps=0, keep=1, lr_scale=0.1, skeleton=0.0)
+VIEWS_SETTLE_STEPS = {"fast": 60, "default": 80, "best": 100}
+# Several shadows are seldom all met by the search alone: twice the polish's base rounds (a
+# round never hands back worse, and costs a few seconds).
+VIEWS_POLISH_ROUNDS = {"fast": (2, 0), "default": (4, 4), "best": (6, 6)}
+
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,7 +74,9 @@ class FitConfig:
     time_limit_s: bounds the search and the polish (None or 0: no limit);
     exclude_library: library poses the search must not start from (tests and benchmarks
     whose targets are shadows of library poses); performers: 1, or 2 to let two people hold
-    the two hands (no limit on how far apart the arms are)."""
+    the two hands (no limit on how far apart the arms are). With two targets (two views):
+    view_angle_deg turns view 1's lamp, wall and frame about the vertical axis through the
+    hands' working volume (scene.Scene.turned); view_weights weighs the views (None: equally)."""
 
     hands: str = "auto"
     size: int = 256
@@ -78,6 +93,35 @@ class FitConfig:
     exclude_library: tuple[str, ...] = ()
     performers: int = 1
     atlas: bool = True
+    view_angle_deg: float = 90.0
+    view_weights: tuple[float, ...] | None = None
+
+
+@dataclasses.dataclass
+class ViewFit:
+    """One view of a fit: its full-resolution scene, target (H, W) bool, the exact shadow
+    (H, W) bool of exactly what pose.json holds, its measures, its weight (the views' sum to
+    1), the target's parts the shadow misses and the shadow's extra parts (metrics.Part)."""
+
+    scene: Scene
+    target: np.ndarray
+    shadow: np.ndarray
+    score: FitScore
+    weight: float
+    missing: list[Part]
+    extra: list[Part]
+
+    def to_json(self) -> dict:
+        """pose.json's per-view measures: the shadow's, its weight, missing and extra parts."""
+        out = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in self.score.as_dict().items()}
+        out["shadow_success"] = out.pop("success")
+        parts = {"missing": self.missing, "extra": self.extra}
+        out["weight"] = round(self.weight, 4)
+        for name, found in parts.items():
+            out[name] = [
+                {"share": round(p.share, 4), "centre": [round(c, 3) for c in p.centre], "thin": p.thin} for p in found
+            ]
+        return out
 
 
 @dataclasses.dataclass
@@ -99,6 +143,7 @@ class FitResult:
     interrupted: bool
     poses: PoseBatch  # the result as tensors (batch 1, hand-slot order as posed.hands)
     problem: Problem  # the search's context (hands, limits, renderers) for follow-up work
+    views: list[ViewFit]  # every view, view 0 first (score, shadow and target above are view 0's)
 
     @property
     def performable(self) -> bool:
@@ -107,7 +152,8 @@ class FitResult:
 
     @property
     def success(self) -> bool:
-        return self.score.success and self.performable
+        """Every view's shadow passes the success test and the pose is performable."""
+        return all(v.score.success for v in self.views) and self.performable
 
 
 @dataclasses.dataclass
@@ -140,10 +186,13 @@ def resolve_device(name: str) -> str:
     raise HandshadowError(f"unknown device {name!r} (use cpu, cuda or auto)")
 
 
-def schedule(quality: str, iters: int | None, size: int, device: str = "cpu") -> tuple[int, int, list[Stage]]:
+def schedule(
+    quality: str, iters: int | None, size: int, device: str = "cpu", views: int = 1
+) -> tuple[int, int, list[Stage]]:
     """(random starts, kept starts, stages) for a quality, scaled to a total step budget. On a
     GPU a batch of a thousand hypotheses costs about what one does, so it keeps CUDA_WIDER
-    times the starts and CUDA_WIDER / 4 times the survivors of every stage but the last."""
+    times the starts and CUDA_WIDER / 4 times the survivors of every stage but the last. With
+    several views a last exact stage (VIEWS_SETTLE) settles the pose in all of them."""
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
     s = Stage
@@ -182,6 +231,8 @@ def schedule(quality: str, iters: int | None, size: int, device: str = "cpu") ->
     if device.startswith("cuda"):
         n_random, n_keep = n_random * CUDA_WIDER, n_keep * CUDA_WIDER
         stages = [dataclasses.replace(st, keep=st.keep * CUDA_WIDER // 4) for st in stages[:-1]] + stages[-1:]
+    if views > 1:
+        stages = [*stages, dataclasses.replace(VIEWS_SETTLE, height=size, steps=VIEWS_SETTLE_STEPS[quality])]
     if iters is not None:
         total = sum(st.steps for st in stages)
         stages = [dataclasses.replace(st, steps=max(1, round(st.steps * iters / total))) for st in stages]
@@ -199,14 +250,16 @@ def hand_counts(config: FitConfig, given: PoseBatch | None = None) -> list[int]:
 
 
 def fit_frame(
-    target: np.ndarray,
+    target: np.ndarray | Sequence[np.ndarray],
     config: FitConfig = FitConfig(),
     progress: Callable[[Progress], None] | None = None,
     extra_starts: PoseBatch | None = None,
     anchor: PoseBatch | None = None,
     stop: Callable[[], bool] | None = None,
 ) -> FitResult:
-    """Fit one or two hands to a binary target frame (H, W).
+    """Fit one or two hands to a binary target frame (H, W), or one pose to one target per
+    view (a list of frames of one size: view 0 lit as today, view 1 turned by
+    config.view_angle_deg, see :func:`view_scenes`).
 
     extra_starts: hypotheses (hand slots right first) always tried, as given and aligned to
     the target; anchor: batch-1 poses the solution should stay close to (a morph's other
@@ -222,21 +275,39 @@ def fit_frame(
     # where an interrupt has nothing to lose.
     import torch._dynamo  # noqa: F401
 
-    height, width = target.shape
-    scene = Scene.default(width, height, light=config.light)
+    targets = [np.asarray(target, bool)] if isinstance(target, np.ndarray) else [np.asarray(t, bool) for t in target]
+    scenes = view_scenes(targets, config)
     counts = hand_counts(config, extra_starts if extra_starts is not None else anchor)
     limit = config.time_limit_s or None  # seconds; None or 0: no limit
     deadline = limit / len(counts) if limit else None
     searches = []
     for n in counts:
-        searches.append(_search(target, scene, n, config, progress, deadline, extra_starts, anchor, stop))
+        searches.append(_search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop))
         if searches[-1].search.interrupted:
             break
     chosen = min(searches, key=HandCountFit.preference_key)
     poses, finish_interrupted = _finish(chosen, config, stop, t0, limit)
     steps = sum(s.search.steps for s in searches)
     interrupted = finish_interrupted or any(s.search.interrupted for s in searches)
-    return _result(target, scene, chosen, poses, config, steps, time.perf_counter() - t0, interrupted)
+    return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, interrupted)
+
+
+def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
+    """The scene of each target (H, W): view 0 is Scene.default; view 1 the same turned by
+    config.view_angle_deg about the vertical axis through the hands' working volume. Raises
+    HandshadowError for more than MAX_VIEWS targets, targets of different sizes, an angle out
+    of range (scene.check_view_angle) or view weights that do not fit."""
+    if not 1 <= len(targets) <= MAX_VIEWS:
+        raise HandshadowError(f"one pose can answer 1 to {MAX_VIEWS} targets, got {len(targets)}")
+    if len({t.shape for t in targets}) > 1:
+        raise HandshadowError(f"the targets must have one size, got {', '.join(str(t.shape) for t in targets)}")
+    weights = config.view_weights
+    if weights is not None and (len(weights) != len(targets) or not all(w > 0 for w in weights)):
+        raise HandshadowError(f"give one positive weight per target ({len(targets)}), got {list(weights)}")
+    height, width = targets[0].shape
+    if len(targets) > 1:
+        check_view_angle(config.view_angle_deg)
+    return default_views(width, height, config.light, (0.0, config.view_angle_deg)[: len(targets)])
 
 
 def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: float | None) -> tuple[PoseBatch, bool]:
@@ -257,7 +328,8 @@ def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: flo
         poses = separate(problem, res.poses, stop=None if res.interrupted else stop)
         chosen.separation_iou = float(iou(problem.shadows(poses)[0], problem.shadows(res.poses)[0]))
         if not res.interrupted:
-            rounds, near_rounds = POLISH_ROUNDS[config.quality]
+            views = len(problem.views)
+            rounds, near_rounds = (POLISH_ROUNDS if views == 1 else VIEWS_POLISH_ROUNDS)[config.quality]
             generator = torch.Generator(device="cpu").manual_seed(config.seed)
             poses = polish(problem, poses, rounds, near_rounds, stop=polish_stop, generator=generator)
     except Interrupted as halt:  # Ctrl-C, stop or the time limit in the finishing steps: keep what they reached
@@ -267,22 +339,22 @@ def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: flo
     return keep_between_light_and_wall(problem, poses), interrupted
 
 
-def _result(target, scene, chosen: HandCountFit, poses: PoseBatch, config, steps, seconds, interrupted) -> FitResult:
+def _result(targets, scenes, chosen: HandCountFit, poses: PoseBatch, config, steps, seconds, interrupted) -> FitResult:
     """The FitResult of the finished poses: measured on exactly what the pose file will hold."""
     hands = [
         h
         for side, batch in zip(chosen.sides, poses.hands)
         for h in batch.to_hand_poses(side, config.hand_model, shape={})
     ]
-    posed = parse_pose(PosedScene(tuple(hands), scene, config.forearm).to_json())  # the file's rounding
-    meshes, mask = cast_shadow(posed, config.mano_dir)
-    shadow = mask > 0.5
-    sc = score(shadow, target)
+    posed = PosedScene(tuple(hands), scenes[0], config.forearm, more_views=tuple(scenes[1:]))
+    posed = parse_pose(posed.to_json())  # the file's rounding
+    meshes, masks = cast_shadows(posed, config.mano_dir)
+    views = [view_fit(s, t, m > 0.5, v.weight) for s, t, m, v in zip(posed.views, targets, masks, chosen.problem.views)]
     pen = penetration(
         [m.vertices for m in meshes], [m.faces for m in meshes], [hand_parts(m) for m in chosen.problem.models]
     )
     arms = arm_check(chosen.problem, poses)
-    info = fit_info(sc, pen, arms, chosen.problem.reach.performers)
+    info = fit_info(views[0].score, pen, arms, chosen.problem.reach.performers, views)
     info.update(
         search_penetration_mm=None if chosen.left_mm is None else round(chosen.left_mm, 2),
         separation_shadow_iou=None if chosen.separation_iou is None else round(chosen.separation_iou, 4),
@@ -296,46 +368,78 @@ def _result(target, scene, chosen: HandCountFit, poses: PoseBatch, config, steps
         quality=config.quality,
         interrupted=interrupted,
     )
+    if len(views) > 1:
+        info["view_angle_deg"] = config.view_angle_deg
     posed = dataclasses.replace(posed, fit=info)
+    first = views[0]
     return FitResult(
-        posed,
-        sc,
-        pen,
-        arms,
+        posed=posed,
+        score=first.score,
+        penetration=pen,
+        arms=arms,
+        shadow=first.shadow,
+        target=first.target,
+        meshes=meshes,
+        steps=steps,
+        seconds=seconds,
+        interrupted=interrupted,
+        poses=poses,
+        problem=chosen.problem,
+        views=views,
+    )
+
+
+def view_fit(scene: Scene, target: np.ndarray, shadow: np.ndarray, weight: float) -> ViewFit:
+    """One view's measures, missing and extra parts, for a shadow (H, W) bool."""
+    thin = thin_parts(target)
+    return ViewFit(
+        scene,
+        target,
         shadow,
-        np.asarray(target, bool),
-        meshes,
-        steps,
-        seconds,
-        interrupted,
-        poses,
-        chosen.problem,
+        score(shadow, target, thin),
+        weight,
+        uncovered_parts(target, shadow, target, thin),
+        uncovered_parts(shadow, target, target, thin),
     )
 
 
 @torch.no_grad()
 def arm_check(problem: Problem, poses: PoseBatch) -> ArmCheck:
-    """The arm rules (hands.arms) for a batch-1 pose."""
+    """The arm rules (hands.arms) for a batch-1 pose, in every view: a forearm leads back
+    when it does so from every view's wall, an elbow is out of the picture when it is out of
+    every view's."""
     outs = [(h, o) for h, o in zip(poses.hands, problem.pose(poses.hands)) if o.forearm_points.shape[1]]
     if not outs:  # no forearms: nothing beyond the wrist to check
         return ArmCheck((), (), 0.0, 1)
     elbows = torch.stack([o.forearm_points[0, -1] for _, o in outs])
     wrists = torch.stack([h.translation[0] for h, _ in outs])
-    xy, elbow_heights = problem.scene.project(elbows)
-    _, wrist_heights = problem.scene.project(wrists)
-    image = problem.scene.image
     as_np = lambda t: t.cpu().double().numpy()  # noqa: E731
-    return check_arms(as_np(xy), as_np(elbows), as_np(elbow_heights), as_np(wrist_heights), image.height, image.width)
+    checks = []
+    for view in problem.views:
+        xy, elbow_heights = view.scene.project(elbows)
+        _, wrist_heights = view.scene.project(wrists)
+        image = view.scene.image
+        checks.append(
+            check_arms(as_np(xy), as_np(elbows), as_np(elbow_heights), as_np(wrist_heights), image.height, image.width)
+        )
+    if len(checks) == 1:
+        return checks[0]
+    every = lambda field: tuple(all(c) for c in zip(*(getattr(k, field) for k in checks)))  # noqa: E731
+    return dataclasses.replace(checks[0], leads_back=every("leads_back"), elbows_out=every("elbows_out"))
 
 
-def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1) -> dict:
+def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1, views: list[ViewFit] = ()) -> dict:
     """The measures pose.json's fit section holds: the shadow's (iou, boundary_f1, hd95,
     thin_recall, shadow_success), the deepest penetration in mm (between the hands, within
     each hand, overall), the arms (forearms leading back, elbows out of the picture, their
     span, the performers the pose needs), performable, and success (the shadow's and
-    performable)."""
+    performable). With several views the shadow's measures are view 0's, "views" holds every
+    view's (ViewFit.to_json) and shadow_success is every view's."""
     shadow = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in sc.as_dict().items()}
     shadow["shadow_success"] = shadow.pop("success")
+    if len(views) > 1:
+        shadow["shadow_success"] = all(v.score.success for v in views)
+        shadow["views"] = [v.to_json() for v in views]
     performable = pen.performable() and arms.holdable(performers)
     return {
         **shadow,
@@ -347,14 +451,16 @@ def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1
         "elbow_span_m": round(arms.span_m, 3),
         "performers": arms.performers,
         "performable": performable,
-        "success": sc.success and performable,
+        "success": shadow["shadow_success"] and performable,
     }
 
 
-def _search(target, scene, n_hands, config, progress, deadline, extra_starts=None, anchor=None, stop=None):
+def _search(targets, scenes, n_hands, config, progress, deadline, extra_starts=None, anchor=None, stop=None):
     sides = ["right", "left"][:n_hands]
-    problem = make_problem(target, scene, sides, config, anchor)
-    n_random, n_keep, stages = schedule(config.quality, config.iters, target.shape[0], config.device)
+    weights = config.view_weights or (1.0,) * len(targets)
+    more = [ViewTarget(s, t, w / weights[0]) for s, t, w in zip(scenes[1:], targets[1:], weights[1:])]
+    problem = make_problem(targets[0], scenes[0], sides, config, anchor, more)
+    n_random, n_keep, stages = schedule(config.quality, config.iters, targets[0].shape[0], config.device, len(targets))
     rng = np.random.default_rng(config.seed)
     atlas = (
         load_atlas(config.hand_model, config.forearm, config.limits)
@@ -367,19 +473,25 @@ def _search(target, scene, n_hands, config, progress, deadline, extra_starts=Non
 
 
 def make_problem(
-    target: np.ndarray, scene: Scene, sides: list[str], config: FitConfig, anchor: PoseBatch | None = None
+    target: np.ndarray,
+    scene: Scene,
+    sides: list[str],
+    config: FitConfig,
+    anchor: PoseBatch | None = None,
+    more_views: Sequence[ViewTarget] = (),
 ) -> Problem:
     """The search's context for a target frame (H, W) bool: the config's hand model for each
-    side ('right', 'left') and their joint limits (float32, on the config's device; 'auto' resolved)."""
+    side ('right', 'left') and their joint limits (float32, on the config's device, 'auto'
+    resolved); further views of the same pose when given (search.Problem)."""
     dtype = torch.float32
-    config = dataclasses.replace(config, device=resolve_device(config.device))
+    device = resolve_device(config.device)
     models = [
-        load_hand(
-            config.hand_model, s, mano_dir=config.mano_dir, forearm=config.forearm, dtype=dtype, device=config.device
-        )
+        load_hand(config.hand_model, s, mano_dir=config.mano_dir, forearm=config.forearm, dtype=dtype, device=device)
         for s in sides
     ]
-    limits = [JointLimits.preset(config.limits, s, dtype=dtype, device=config.device) for s in sides]
+    limits = [JointLimits.preset(config.limits, s, dtype=dtype, device=device) for s in sides]
     if anchor is not None:
-        anchor = anchor.to(config.device)
-    return Problem(scene, target, models, limits, anchor=anchor, reach=Reach().for_performers(config.performers))
+        anchor = anchor.to(device)
+
+    reach = Reach().for_performers(config.performers)
+    return Problem(scene, target, models, limits, anchor=anchor, reach=reach, more_views=more_views)

@@ -1,11 +1,17 @@
 """Telling a person how to hold their hands: a few plain sentences per hand, and the guide
-picture (the hands seen from the performer's side, with those sentences beside them)."""
+picture (the hands seen from the performer's side, with those sentences beside them). With
+several views (one pose, a lamp and a wall per shadow): where to put each lamp and wall, and
+per view how well its shadow came out and which parts of its target are missing."""
 
 from __future__ import annotations
+
+import math
+from collections.abc import Sequence
 
 import numpy as np
 
 from handshadow.hands.rig import FINGERS
+from handshadow.metrics import FitScore, Part
 from handshadow.poses import HandPose
 from handshadow.scene import Scene
 
@@ -105,6 +111,139 @@ def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) 
     draw.text((8, 6), "What you see from behind the lamp", fill=(40, 40, 40), font=font)
     draw.text((w - inset.width - 6, inset.height + 10), "shadow vs target", fill=(90, 90, 90), font=font)
     y = h + 8
+    for line in lines:
+        draw.text((10, y), line, fill=(20, 20, 20), font=font)
+        y += 18
+    return np.asarray(canvas)
+
+
+# Directions in the room from the hands, as the performer (by view 0's lamp, facing its wall)
+# names them, by the angle about the vertical from "toward you" (positive: to the right).
+_TURN_WORDS = [
+    (22.5, "toward you"),
+    (67.5, "toward you and to the {side}"),
+    (112.5, "to the {side}"),
+    (157.5, "to the {side}, toward wall 0"),
+    (180.0, "toward wall 0"),
+]
+
+
+def _heading_deg(vec: np.ndarray, first: Scene) -> float:
+    """The angle about the vertical from "toward you" (view 0's wall normal) to a vector,
+    degrees, positive to the performer's right."""
+    toward_you = np.asarray(first.wall.normal, float)
+    right = np.asarray(first.image.u, float) / np.linalg.norm(first.image.u)
+    return math.degrees(math.atan2(float(vec @ right), float(vec @ toward_you)))
+
+
+def _direction(angle_deg: float) -> str:
+    side = "right" if angle_deg > 0 else "left"
+    return next(words for limit, words in _TURN_WORDS if abs(angle_deg) <= limit).format(side=side)
+
+
+def lamp_lines(views: Sequence[Scene], hands_centre: np.ndarray) -> list[str]:
+    """Where each view's lamp and wall go, from the hands' centre (3,) metres, in the
+    performer's words (view 0's frame: right, toward you)."""
+    lines = []
+    c = np.asarray(hands_centre, float)
+    for k, view in enumerate(views):
+        normal = np.asarray(view.wall.normal, float)
+        wall_m = float((c - np.asarray(view.wall.point)) @ normal)
+        picture = f"its picture {np.linalg.norm(view.image.v):.2f} m high"
+        if view.light.type == "point":
+            lamp = np.asarray(view.light.position, float)
+            where = _direction(_heading_deg(lamp - c, views[0]))
+            lamp_text = f"the lamp {np.linalg.norm(lamp - c):.2f} m from the hands, {where}"
+        else:
+            lamp_text = "a distant light shining square onto its wall"
+        turn = _heading_deg(normal, views[0])
+        turned = f", turned {abs(turn):.0f} degrees to your {'right' if turn > 0 else 'left'}" if k else ""
+        lines.append(f"View {k}: {lamp_text}; its wall {wall_m:.2f} m beyond the hands{turned}, {picture}.")
+    if len(views) > 1:
+        lines.append("  Keep every lamp level with the middle of its picture; light one lamp at a time to check.")
+    return lines
+
+
+def _place(centre: tuple[float, float]) -> str:
+    """'the top left', 'the middle', ... of a frame, for a centre (x, y) in shares of it."""
+    row = ("top", "", "bottom")[min(2, int(centre[1] * 3))]
+    col = ("left", "", "right")[min(2, int(centre[0] * 3))]
+    return "the " + (f"{row} {col}".strip() or "middle")
+
+
+PARTS_NAMED = 3  # the largest this many places of missing parts (and of extra shadow) are named
+
+
+def _by_place(parts: Sequence[Part], thin_words: bool) -> list[str]:
+    """Parts grouped by where they are (shares summed, largest first), as words."""
+    places: dict[str, list[Part]] = {}
+    for p in parts:
+        places.setdefault(_place(p.centre), []).append(p)
+    ranked = sorted(places.items(), key=lambda item: -sum(p.share for p in item[1]))
+    out = []
+    for place, found in ranked[:PARTS_NAMED]:
+        kind = ("thin parts" if len(found) > 1 else "a thin part") if all(p.thin for p in found) else "a part"
+        out.append(f"{kind + ' at ' if thin_words else ''}{place} ({sum(p.share for p in found):.0%})")
+    return out
+
+
+def parts_text(missing: Sequence[Part], extra: Sequence[Part]) -> str:
+    """Which target parts a shadow misses and where it spills (shares of the target's area),
+    in words."""
+    said = []
+    if missing:
+        said.append("missing " + ", ".join(_by_place(missing, True)))
+    if extra:
+        said.append("extra shadow at " + ", ".join(_by_place(extra, False)))
+    return "; ".join(said) if said else "nothing missing"
+
+
+def view_lines(scores: Sequence[FitScore], parts: Sequence[tuple[list[Part], list[Part]]], weights) -> list[str]:
+    """Per view how well its shadow came out and which target parts it misses (shares of the
+    target's area), then the trade-off when the views could not all be met."""
+    lines = []
+    for k, (s, (missing, extra)) in enumerate(zip(scores, parts)):
+        verdict = "a success" if s.success else "short of the success test"
+        lines.append(f"View {k}: {s} ({verdict}); {parts_text(missing, extra)}.")
+    met = [k for k, s in enumerate(scores) if s.success]
+    ratio = " : ".join(f"{w / weights[0]:g}" for w in weights)
+    if met and len(met) < len(scores):
+        gave = ", ".join(str(k) for k in range(len(scores)) if k not in met)
+        lines.append(
+            f"  One pose could not cast every shadow: view {gave} gave way (view weights {ratio};"
+            " --view-weights favours a view)."
+        )
+    elif not met:
+        lines.append(
+            f"  No view passes the success test: the pose is the best compromise found (view weights {ratio})."
+        )
+    return lines
+
+
+GUIDE_TILE_PX = 360  # each view's shadow over its target, this many pixels wide
+
+
+def guide_views_image(
+    view: np.ndarray, plan: np.ndarray, overlays: Sequence[np.ndarray], lines: list[str]
+) -> np.ndarray:
+    """The guide for several views: the performer's view and the plan of the room side by
+    side, each view's shadow over its target below them, then the instructions. uint8 RGB."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    h, w = view.shape[:2]
+    width = w + plan.shape[1]
+    tile = min(GUIDE_TILE_PX, width // len(overlays) - 12)
+    canvas = Image.new("RGB", (width, h + tile + 30 + 18 * (len(lines) + 2)), "white")
+    canvas.paste(Image.fromarray(view), (0, 0))
+    canvas.paste(Image.fromarray(plan), (w, 0))
+    draw = ImageDraw.Draw(canvas)
+    font = ImageFont.load_default()
+    draw.text((8, 6), "What you see from behind lamp 0", fill=(40, 40, 40), font=font)
+    for k, overlay in enumerate(overlays):
+        x = 6 + k * (tile + 12)
+        canvas.paste(Image.fromarray(overlay).resize((tile, tile * overlay.shape[0] // overlay.shape[1])), (x, h + 22))
+        draw.text((x, h + 6), f"view {k}: shadow vs target", fill=(90, 90, 90), font=font)
+    y = h + tile + 34
     for line in lines:
         draw.text((10, y), line, fill=(20, 20, 20), font=font)
         y += 18

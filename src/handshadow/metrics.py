@@ -8,7 +8,8 @@ All functions take binary (H, W) numpy masks (shadow, target) and work in pixels
     thin_recall      share of the target's thin parts covered by the shadow; thin parts are
                      what an opening with a disc of radius 4 % of the frame height removes
 A fit is a success when IoU >= 0.8, thin-part recall >= 0.6 and HD95 <= 0.03.
-:func:`rank_key` orders results by these measures (the search's ranking).
+:func:`rank_key` orders results by these measures (the search's ranking); :class:`ViewScores`
+judges one pose in several views (one per lamp and wall) together.
 """
 
 from __future__ import annotations
@@ -28,6 +29,13 @@ NEAR_MISS_HD95 = 0.01  # how far past the HD95 bar a result still counts as a ne
 # much thin-part recall, minus this much HD95 (a share of the frame, so 0.01 weighs 0.04).
 RANK_THIN = 0.5
 RANK_HD95 = 4.0
+# Parts of a target a shadow misses (or shadow it adds), as a person would name them: slivers
+# along the outline are not parts (a part reaches PART_MIN_DEPTH_PX, or PART_DEPTH_SHARE of the
+# frame height when that is more, from its edge: at least 3 px across), nor are pieces smaller
+# than PART_MIN_SHARE of the target's area.
+PART_MIN_DEPTH_PX = 2.0
+PART_DEPTH_SHARE = 0.008
+PART_MIN_SHARE = 0.01
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,6 +147,79 @@ def rank_key(s: FitScore) -> tuple:
     """Sort key, smaller is better: successes first, then a blend of the measures
     (RANK_THIN, RANK_HD95)."""
     return (not s.success, -(s.iou + RANK_THIN * s.thin_recall - RANK_HD95 * s.hd95))
+
+
+@dataclasses.dataclass(frozen=True)
+class ViewScores:
+    """One pose's measures in every view (view 0 first) and the views' weights (summing to 1).
+
+    A success when every view is one; a near miss when it is not but every view is a success
+    or a near miss. :meth:`key` ranks: the weighted share of failed views first, then the
+    weighted sum of the views' blends (with one view exactly :func:`rank_key`)."""
+
+    scores: tuple[FitScore, ...]
+    weights: tuple[float, ...]
+
+    @property
+    def success(self) -> bool:
+        return all(s.success for s in self.scores)
+
+    @property
+    def near_miss(self) -> bool:
+        return not self.success and all(s.success or s.near_miss for s in self.scores)
+
+    def key(self) -> tuple:
+        if len(self.scores) == 1:
+            return rank_key(self.scores[0])
+        keys = [rank_key(s) for s in self.scores]
+        failed = sum(w * k[0] for w, k in zip(self.weights, keys))
+        return (failed, sum(w * k[1] for w, k in zip(self.weights, keys)))
+
+    def __str__(self) -> str:
+        if len(self.scores) == 1:
+            return str(self.scores[0])
+        return "; ".join(f"view {k}: {s}" for k, s in enumerate(self.scores))
+
+
+@dataclasses.dataclass(frozen=True)
+class Part:
+    """A piece of the target the shadow misses (or of shadow outside the target): its area
+    as a share of the target's, its centre (x, y) as shares of the frame's width and height
+    from the top-left corner, and whether it is mostly the target's thin parts (an ear, a
+    beak, a finger)."""
+
+    share: float
+    centre: tuple[float, float]
+    thin: bool
+
+
+def uncovered_parts(
+    shape: np.ndarray, cover: np.ndarray, target: np.ndarray, thin: np.ndarray | None = None
+) -> list[Part]:
+    """The pieces of ``shape`` (H, W) bool that ``cover`` (H, W) bool leaves bare, largest
+    first: target parts a shadow misses (shape = target, cover = shadow) or extra shadow
+    (shape = shadow, cover = target). Slivers and crumbs are left out (PART_MIN_DEPTH_PX,
+    PART_DEPTH_SHARE, PART_MIN_SHARE); shares are of the target's area; thin: the target's
+    thin parts."""
+    shape, cover, target = (np.asarray(a, bool) for a in (shape, cover, target))
+    h, w = shape.shape
+    thin = thin_parts(target) if thin is None else thin
+    bare = shape & ~cover
+    depth = ndimage.distance_transform_edt(bare)
+    labels, n = ndimage.label(bare)
+    area = max(int(target.sum()), 1)
+    min_depth = max(PART_MIN_DEPTH_PX, PART_DEPTH_SHARE * h)
+    parts = []
+    for k in range(1, n + 1):
+        piece = labels == k
+        size = int(piece.sum())
+        if size < PART_MIN_SHARE * area or depth[piece].max() < min_depth:
+            continue
+
+        ys, xs = np.nonzero(piece)
+        on_thin = int((piece & thin).sum())
+        parts.append(Part(size / area, ((xs.mean() + 0.5) / w, (ys.mean() + 0.5) / h), on_thin >= 0.5 * size))
+    return sorted(parts, key=lambda p: -p.share)
 
 
 def rank(shadows: np.ndarray, target: np.ndarray, thin: np.ndarray | None = None) -> list[int]:

@@ -10,6 +10,7 @@ The CLI and the app call these; each writes its folder completely or not at all.
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -21,15 +22,15 @@ from handshadow.errors import HandshadowError
 from handshadow.export.files import ResultFolder, require_mp4, shadow_image, write_gif, write_json, write_mp4, write_png
 from handshadow.export.images import mask_image, overlay_image, overlay_preview
 from handshadow.export.meshes import write_glb, write_obj
-from handshadow.export.pictures import performer_framing, performer_view, scene_picture
+from handshadow.export.pictures import performer_framing, performer_view, plan_picture, scene_picture
 from handshadow.export.plots import path_plot
-from handshadow.fit import FitConfig, FitResult, fit_frame, resolve_device, schedule
-from handshadow.guide import describe, guide_image
+from handshadow.fit import FitConfig, FitResult, fit_frame, resolve_device, schedule, view_scenes
+from handshadow.guide import describe, guide_image, guide_views_image, lamp_lines, view_lines
 from handshadow.hands import load_hand
-from handshadow.hands.posed import PosedMesh, cast_shadow
+from handshadow.hands.posed import PosedMesh, cast_shadows
 from handshadow.interpolate import PathReport, morph_targets, refine_path, report, straight_path
 from handshadow.poses import PoseBatch, PosedScene
-from handshadow.scene import Scene
+from handshadow.scene import Scene, views_to_json
 from handshadow.search import Interrupted, Progress
 from handshadow.target import load_target
 
@@ -38,17 +39,28 @@ def mesh_names(meshes: list[PosedMesh]) -> list[str]:
     return [f"{m.side}.obj" for m in meshes]
 
 
-def write_scene_files(folder: ResultFolder, scene: Scene, meshes: list[PosedMesh], mask: np.ndarray) -> None:
-    """shadow.png, scene.json, <side>.obj, hands.glb and scene.png into the folder."""
-    shadow = shadow_image(mask)
-    write_png(folder / "shadow.png", shadow)
-    write_json(folder / "scene.json", scene.to_json(meshes=mesh_names(meshes)))
+def view_name(stem: str, view: int, n_views: int) -> str:
+    """A per-view file's name: 'shadow.png' with one view, 'shadow_K.png' with several."""
+    return f"{stem}.png" if n_views == 1 else f"{stem}_{view}.png"
+
+
+def write_scene_files(
+    folder: ResultFolder, scenes: list[Scene], meshes: list[PosedMesh], masks: list[np.ndarray]
+) -> None:
+    """shadow.png (shadow_K.png per view with several), scene.json (a list of views with
+    several), <side>.obj, hands.glb and scene.png into the folder; masks (H, W) in [0, 1]
+    per view."""
+    shadows = [shadow_image(m) for m in masks]
+    for k, shadow in enumerate(shadows):
+        write_png(folder / view_name("shadow", k, len(scenes)), shadow)
+    write_json(folder / "scene.json", views_to_json(scenes, meshes=mesh_names(meshes)))
     for m in meshes:
         write_obj(folder / f"{m.side}.obj", m.vertices, m.faces, f"{m.side}_hand")
     hands = [(m.side, m.vertices, m.faces) for m in meshes]
-    write_glb(folder / "hands.glb", scene, hands, shadow)
+    write_glb(folder / "hands.glb", scenes[0], hands, shadows[0], list(zip(scenes[1:], shadows[1:])))
     tips = np.concatenate([m.keypoints[[4, 12]] for m in meshes])  # thumb and middle tips
-    write_png(folder / "scene.png", scene_picture(scene, hands, mask, rays_through=tips))
+    picture = scene_picture(scenes[0], hands, masks[0], rays_through=tips, more_views=list(zip(scenes[1:], masks[1:])))
+    write_png(folder / "scene.png", picture)
 
 
 def resolve_target(source: str, width: int, height: int, invert: bool | None = None) -> np.ndarray:
@@ -85,9 +97,12 @@ class FrameRecorder:
             self._next = self.done + self.every
 
 
-def progress_frames(frames: list[Progress], target: np.ndarray, posed: PosedScene, size: int = 220) -> list[np.ndarray]:
+def progress_frames(
+    frames: list[Progress], targets: np.ndarray | list[np.ndarray], posed: PosedScene, size: int = 220
+) -> list[np.ndarray]:
     """One picture per snapshot: the hands in 3D (from the performer's side) beside their
-    shadow over the target."""
+    shadow over the target, one per view (targets: (H, W) bool, or one per view)."""
+    targets = [targets] if isinstance(targets, np.ndarray) else list(targets)
     frames = [f for f in frames if f.poses.n_hands == len(posed.hands)]  # not the search with the other hand count
     models = [load_hand(h.model, h.side, h.shape, None, forearm=posed.forearm) for h in posed.hands]
     with torch.no_grad():  # the snapshots' poses live on the fit's device, these models on the CPU
@@ -100,7 +115,8 @@ def progress_frames(frames: list[Progress], target: np.ndarray, posed: PosedScen
     for f, vs in zip(frames, vertices):
         meshes = [(h.side, v, fs) for h, fs, v in zip(posed.hands, faces, vs)]
         view = performer_view(posed.scene, meshes, size=(size, size), supersample=1, framing=framing)
-        frame = np.concatenate([view, overlay_preview(target, f.shadow, size)], 1)
+        overlays = [overlay_preview(t, m, size) for t, m in zip(targets, (f.shadow, *f.more_shadows))]
+        frame = np.concatenate([view, *overlays], 1)
         frame[-14:, :] = 255
         bar = int(frame.shape[1] * f.done / max(f.total, 1))
         frame[-10:-4, :bar] = (70, 130, 200)
@@ -109,7 +125,7 @@ def progress_frames(frames: list[Progress], target: np.ndarray, posed: PosedScen
 
 
 def fit_to_folder(
-    target_source: str,
+    target_source: str | Sequence[str],
     out: str | Path,
     config: FitConfig,
     force: bool = False,
@@ -121,13 +137,20 @@ def fit_to_folder(
     """Fit hands to a target and write the result folder: target.png, shadow.png, overlay.png,
     scene.json, pose.json, <side>.obj, hands.glb, scene.png, progress.gif, guide.png.
 
+    Several targets (a sequence of sources, one per view, FitConfig.view_angle_deg between
+    them) fit one pose to all: target_K.png, shadow_K.png and overlay_K.png per view K, and
+    scene.json a list of views; hands.glb and scene.png show every lamp and wall with its
+    shadow, guide.png where to put each lamp and which target parts each shadow misses.
+
     ``progress_hook`` is called with each search.Progress. Ctrl-C, or ``stop`` (a callable
     checked at every step) returning True, ends the fit early and writes the best result so
     far, completely.
     Returns (folder, FitResult, instruction lines)."""
     ResultFolder(out, force)  # refuse an unusable output folder before the work
-    frame = resolve_target(target_source, config.size, config.size, invert)
-    _, _, stages = schedule(config.quality, config.iters, config.size, resolve_device(config.device))
+    sources = [target_source] if isinstance(target_source, str) else list(target_source)
+    frames = [resolve_target(source, config.size, config.size, invert) for source in sources]
+    view_scenes(frames, config)  # bad view options fail here, before the work
+    _, _, stages = schedule(config.quality, config.iters, config.size, resolve_device(config.device), len(frames))
     searches = 2 if config.hands == "auto" else 1  # fit_frame runs one search per hand count
     total = sum(s.steps for s in stages) * searches
     recorder = FrameRecorder(total, searches)
@@ -143,34 +166,56 @@ def fit_to_folder(
             # After the last search's last step come the separation, the polish and the export.
             bar.set_description("finishing" if recorder.finished else "fitting")
 
-    result = fit_frame(frame, config, progress=on_progress, stop=stop)
+    result = fit_frame(frames[0] if len(frames) == 1 else frames, config, progress=on_progress, stop=stop)
     if bar is not None:
         bar.close()
     done = recorder.frames[-1].done if recorder.frames else 0
+    more = tuple(v.shadow.astype(np.float32) for v in result.views[1:])
     recorder.frames.append(
-        Progress(-1, 0, done, max(done, 1), result.shadow.astype(np.float32), result.score.iou, result.poses)
+        Progress(-1, 0, done, max(done, 1), result.shadow.astype(np.float32), result.score.iou, result.poses, {}, more)
     )
-    posed, meshes, shadow = result.posed, result.meshes, result.shadow
-    frames = progress_frames(recorder.frames, frame, posed)
-    lines = describe(list(posed.hands), posed.scene)
-    hands = [(m.side, m.vertices, m.faces) for m in meshes]
-    guide = guide_image(performer_view(posed.scene, hands, size=(560, 560)), overlay_image(frame, shadow), lines)
+    pictures = progress_frames(recorder.frames, frames, result.posed)
+    lines, guide = _guide(result)
     with ResultFolder(out, force) as folder:
-        write_png(folder / "target.png", mask_image(frame))
-        write_png(folder / "overlay.png", overlay_image(frame, shadow))
-        write_scene_files(folder, posed.scene, meshes, shadow.astype(float))
-        write_json(folder / "pose.json", posed.to_json())
-        write_gif(folder / "progress.gif", frames)
+        for k, view in enumerate(result.views):
+            write_png(folder / view_name("target", k, len(frames)), mask_image(view.target))
+            write_png(folder / view_name("overlay", k, len(frames)), overlay_image(view.target, view.shadow))
+        masks = [v.shadow.astype(float) for v in result.views]
+        write_scene_files(folder, result.posed.views, result.meshes, masks)
+        write_json(folder / "pose.json", result.posed.to_json())
+        write_gif(folder / "progress.gif", pictures)
         write_png(folder / "guide.png", guide)
         path = folder.commit()
     return path, result, lines
 
 
+def _guide(result: FitResult) -> tuple[list[str], np.ndarray]:
+    """The instruction lines and guide.png of a fit: how to hold the hands; with several
+    views also where each lamp goes and how each shadow came out, and a plan of the room."""
+    posed = result.posed
+    lines = describe(list(posed.hands), posed.scene)
+    hands = [(m.side, m.vertices, m.faces) for m in result.meshes]
+    view = performer_view(posed.scene, hands, size=(560, 560))
+    overlays = [overlay_image(v.target, v.shadow) for v in result.views]
+    if len(result.views) == 1:
+        return lines, guide_image(view, overlays[0], lines)
+    vertices = np.concatenate([m.vertices for m in result.meshes])
+    lines = lines + lamp_lines(posed.views, vertices.mean(0)) + result_lines(result)
+    return lines, guide_views_image(view, plan_picture(posed.views, vertices), overlays, lines)
+
+
+def result_lines(result: FitResult) -> list[str]:
+    """Per view how its shadow came out, which target parts it misses, and the trade-off."""
+    views = result.views
+    return view_lines([v.score for v in views], [(v.missing, v.extra) for v in views], [v.weight for v in views])
+
+
 def render_to_folder(posed: PosedScene, out: str | Path, force: bool = False, mano_dir: str | None = None) -> Path:
-    """Render a pose file into ``out``: shadow.png, scene.json, <side>.obj, hands.glb, scene.png."""
-    meshes, mask = cast_shadow(posed, mano_dir)
+    """Render a pose file into ``out``: shadow.png (shadow_K.png per view when the file has
+    several), scene.json, <side>.obj, hands.glb, scene.png."""
+    meshes, masks = cast_shadows(posed, mano_dir)
     with ResultFolder(out, force) as folder:
-        write_scene_files(folder, posed.scene, meshes, mask)
+        write_scene_files(folder, posed.views, meshes, masks)
         write_json(folder / "pose.json", posed.to_json())
         return folder.commit()
 

@@ -4,7 +4,7 @@ pose.json holds the hands of a result (per hand its side, model, shape, joint an
 rotation and translation) plus the scene, as written by ``fit`` and read by ``render``:
 
     {"format": "handshadow.pose/1",
-     "scene": {...scene.json contract without "meshes"...},
+     "scene": {...scene.json contract without "meshes"...},  # or a list of views, view 0 first
      "forearm": true,
      "hands": [{"side": "right", "model": "anny", "shape": {...},
                 "pose_deg": [[twist, spread, bend] x 15],   # rig.JOINT_NAMES order, degrees
@@ -28,7 +28,7 @@ import numpy as np
 from handshadow.errors import HandshadowError
 from handshadow.hands.rig import JOINT_NAMES, check_side
 from handshadow.poses import FORMAT, HandPose, PosedScene
-from handshadow.scene import Scene, SceneError
+from handshadow.scene import Scene, SceneError, views_from_json
 
 PATH_FORMAT = "handshadow.poses/1"  # interpolate's poses.json: a scene and a list of frames
 
@@ -65,7 +65,7 @@ def parse_pose(data, where: str = "pose") -> PosedScene:
     if data.get("format", FORMAT) != FORMAT:
         raise PoseFileError(f"{where}: unsupported format {data.get('format')!r} (expected {FORMAT!r})")
     try:
-        scene = Scene.from_json(data["scene"]) if "scene" in data else Scene.default()
+        views = views_from_json(data["scene"]) if "scene" in data else [Scene.default()]
     except SceneError as exc:
         raise PoseFileError(f"{where}: scene: {exc}") from None
     hands_data = data.get("hands")
@@ -81,7 +81,8 @@ def parse_pose(data, where: str = "pose") -> PosedScene:
     unknown = set(data) - {"format", "about", "scene", "forearm", "hands", "fit", "iou_a", "iou_b"}
     if unknown:
         raise PoseFileError(f"{where}: unknown field(s) {', '.join(sorted(unknown))}")
-    return PosedScene(hands=hands, scene=scene, forearm=forearm, fit=fit if isinstance(fit, dict) else None)
+    fit = fit if isinstance(fit, dict) else None
+    return PosedScene(hands=hands, scene=views[0], forearm=forearm, fit=fit, more_views=tuple(views[1:]))
 
 
 def _parse_hand(h, where: str) -> HandPose:

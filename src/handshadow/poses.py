@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from handshadow.scene import Scene
+from handshadow.scene import Scene, views_to_json
 
 if TYPE_CHECKING:
     import torch
@@ -62,17 +62,25 @@ class HandPose:
 
 @dataclasses.dataclass(frozen=True)
 class PosedScene:
-    """A result with its scene: what a pose file holds."""
+    """A result with its scene: what a pose file holds. ``scene`` is view 0's lamp, wall and
+    frame; ``more_views`` those of further views (one pose casting a shadow per view), which
+    the file holds as a list of views under "scene"."""
 
     hands: tuple[HandPose, ...]
     scene: Scene
     forearm: bool = True
     fit: dict | None = None
+    more_views: tuple[Scene, ...] = ()
+
+    @property
+    def views(self) -> list[Scene]:
+        """Every view's scene, view 0 first."""
+        return [self.scene, *self.more_views]
 
     def to_json(self) -> dict:
         out = {
             "format": FORMAT,
-            "scene": self.scene.to_json(),
+            "scene": views_to_json(self.views),
             "forearm": self.forearm,
             "hands": [h.to_json() for h in self.hands],
         }

@@ -16,6 +16,11 @@ measured from the top-left corner put pixel centres at (j + 0.5, i + 0.5).
      "wall": {"point": [...], "normal": [...]},
      "image": {"width": W, "height": H, "origin": [...], "u": [...], "v": [...]},
      "meshes": ["left.obj", "right.obj"]}
+
+Several views (one pose, one lamp and wall per target): ``scene.json`` is then a list of such
+objects, view 0 first, each complete under the contract above (:func:`views_to_json`,
+:func:`views_from_json`). View k > 0 is view 0 turned about the vertical axis through
+VIEW_AXIS_POINT_M, where the hands work (:meth:`Scene.turned`).
 """
 
 from __future__ import annotations
@@ -39,6 +44,16 @@ WALL_CLEARANCE_M = 0.03  # the nearest a hand comes to the wall while the search
 LAMP_CLEARANCE_M = 0.25  # room kept before the lamp (a point light)
 FARTHEST_M = 3.0  # the farthest from the wall (a directional light has no lamp to stop at)
 RESULT_MARGIN_M = 0.005  # a result keeps at least this from the wall and the lamp's plane
+# Further views turn the lamp, the wall and the frame about the vertical line through this
+# point: midway between the default lamp and wall, where the hands work (1 m from each).
+VIEW_AXIS_POINT_M = (0.0, 0.0, LAMP_TO_WALL_M / 2)
+# The turn of a second view, degrees, either way: from 45 the frames of both views stay in
+# front of the other view's wall (a frame 0.8 m high, 1 m from the axis: 1 - cos a >= 0.4 sin a);
+# up to 135 the second lamp stays LAMP_CLEARANCE_M in front of the first wall (1 + cos a >= 0.25).
+VIEW_ANGLE_MIN_DEG = 45.0
+VIEW_ANGLE_MAX_DEG = 135.0
+TURN_DIGITS = 12  # a turned scene's coordinates are rounded to this many decimals (1e-12 m)
+UNIT_ROUNDS = 4  # normalisations that bring a direction's length to exactly 1.0
 
 
 class SceneError(HandshadowError):
@@ -101,6 +116,36 @@ class Scene:
             image=ImageFrame(
                 width=width, height=height, origin=(-w_m / 2, h_m / 2, 0.0), u=(w_m, 0.0, 0.0), v=(0.0, -h_m, 0.0)
             ),
+        )
+
+    def turned(self, angle_deg: float, about: tuple[float, float, float] = VIEW_AXIS_POINT_M) -> Scene:
+        """The same lamp, wall and frame turned by angle_deg about the vertical (+y) axis
+        through ``about`` (metres): positive turns the lamp from in front of the wall toward
+        +x, the performer's right; 90 puts it 1 m to the right of the hands and the wall 1 m
+        to their left, facing it."""
+        a = math.radians(angle_deg)
+        rot = np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
+        pivot = np.asarray(about, float)
+
+        def point(p):
+            return _clean(rot @ (np.asarray(p, float) - pivot) + pivot)
+
+        def vector(d):
+            return _clean(rot @ np.asarray(d, float))
+
+        def direction(d):
+            return _unit(vector(d))
+
+        light = (
+            Light("point", position=point(self.light.position))
+            if self.light.type == "point"
+            else Light("directional", direction=direction(self.light.direction))
+        )
+        im = self.image
+        return Scene(
+            light=light,
+            wall=Wall(point=point(self.wall.point), normal=direction(self.wall.normal)),
+            image=ImageFrame(im.width, im.height, point(im.origin), vector(im.u), vector(im.v)),
         )
 
     def with_size(self, width: int, height: int) -> Scene:
@@ -213,6 +258,7 @@ class Scene:
             if np.linalg.norm(normal) == 0:
                 raise SceneError("wall.normal must not be zero")
             wall = Wall(point=_vec3(data["wall"]["point"], "wall.point"), normal=tuple(normal / np.linalg.norm(normal)))
+
             im = data["image"]
             width, height = int(im["width"]), int(im["height"])
             if width < 1 or height < 1 or width > 8192 or height > 8192:
@@ -245,6 +291,58 @@ class Scene:
                 raise SceneError("the point light must be in front of the wall (on the side its normal faces)")
         elif np.asarray(self.light.direction) @ n >= 0:
             raise SceneError("the directional light must shine toward the wall (direction . normal < 0)")
+
+
+def check_view_angle(angle_deg: float) -> None:
+    """Raise SceneError unless VIEW_ANGLE_MIN_DEG <= |angle_deg| <= VIEW_ANGLE_MAX_DEG."""
+    if not (math.isfinite(angle_deg) and VIEW_ANGLE_MIN_DEG <= abs(angle_deg) <= VIEW_ANGLE_MAX_DEG):
+        raise SceneError(
+            f"the view angle must be between {VIEW_ANGLE_MIN_DEG:g} and {VIEW_ANGLE_MAX_DEG:g} degrees"
+            f" (or -{VIEW_ANGLE_MAX_DEG:g} and -{VIEW_ANGLE_MIN_DEG:g}), got {angle_deg:g}"
+        )
+
+
+def default_views(
+    width: int, height: int, light: LightType = "point", angles_deg: tuple[float, ...] = (0.0,)
+) -> list[Scene]:
+    """One default scene per view: view k is :meth:`Scene.default` turned by angles_deg[k]
+    (0 for view 0) about the vertical axis through VIEW_AXIS_POINT_M."""
+    base = Scene.default(width, height, light=light)
+    return [base if a == 0 else base.turned(a) for a in angles_deg]
+
+
+def views_to_json(views: list[Scene], meshes: list[str] | None = None) -> dict | list[dict]:
+    """scene.json for one view (the object of the contract) or several (a list of them, view 0
+    first)."""
+    out = [v.to_json(meshes=meshes) for v in views]
+    return out[0] if len(out) == 1 else out
+
+
+def views_from_json(data) -> list[Scene]:
+    """The views of a scene.json: one object (one view) or a non-empty list of them."""
+    if isinstance(data, list):
+        if not data:
+            raise SceneError("a list of views must not be empty")
+        return [Scene.from_json(v) for v in data]
+    if not isinstance(data, dict):
+        raise SceneError("a scene must be an object or a list of views")
+    return [Scene.from_json(data)]
+
+
+def _clean(values: np.ndarray) -> tuple[float, float, float]:
+    """Three coordinates with the rounding noise of a turn removed (1e-12 m), no -0.0."""
+    return tuple(float(x) + 0.0 for x in np.round(values, TURN_DIGITS))
+
+
+def _unit(values) -> tuple[float, float, float]:
+    """A unit vector that reading scene.json (which normalises) leaves as it is."""
+    v = np.asarray(values, float)
+    for _ in range(UNIT_ROUNDS):
+        norm = float(np.linalg.norm(v))
+        if norm == 1.0:
+            break
+        v = v / norm
+    return tuple(float(x) + 0.0 for x in v)
 
 
 def _vec3(value, name: str) -> tuple[float, float, float]:

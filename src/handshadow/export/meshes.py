@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -28,20 +29,26 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, name: str) ->
 
 
 def scene_trimesh(
-    scene: Scene, hands: list[tuple[str, np.ndarray, np.ndarray]], shadow: np.ndarray | None
+    scene: Scene,
+    hands: list[tuple[str, np.ndarray, np.ndarray]],
+    shadow: np.ndarray | None,
+    more_views: Sequence[tuple[Scene, np.ndarray | None]] = (),
 ) -> trimesh.Scene:
     """A trimesh scene: the hands (named by side), the wall frame textured with the shadow,
-    and a small sphere at the lamp (or toward the sun for a directional light)."""
+    and a small sphere at the lamp (or toward the sun for a directional light); further views
+    (scene, shadow image) add their walls and lamps as wall_K and light_K, K = 1, 2, ..."""
     out = trimesh.Scene()
     for name, verts, faces in hands:
         mesh = trimesh.Trimesh(verts, faces, process=False)
         mesh.visual = trimesh.visual.ColorVisuals(mesh, face_colors=np.r_[np.asarray(SKIN) * 255, 255].astype(np.uint8))
         out.add_geometry(mesh, node_name=f"{name}_hand", geom_name=f"{name}_hand")
-    out.add_geometry(wall_mesh(scene, shadow), node_name="wall", geom_name="wall")
-    marker = trimesh.creation.icosphere(subdivisions=2, radius=0.04)
-    marker.apply_translation(light_marker_position(scene))
-    marker.visual = trimesh.visual.ColorVisuals(marker, face_colors=[255, 214, 80, 255])
-    out.add_geometry(marker, node_name="light", geom_name="light")
+    for k, (view, image) in enumerate([(scene, shadow), *more_views]):
+        suffix = f"_{k}" if k else ""
+        out.add_geometry(wall_mesh(view, image), node_name=f"wall{suffix}", geom_name=f"wall{suffix}")
+        marker = trimesh.creation.icosphere(subdivisions=2, radius=0.04)
+        marker.apply_translation(light_marker_position(view))
+        marker.visual = trimesh.visual.ColorVisuals(marker, face_colors=[255, 214, 80, 255])
+        out.add_geometry(marker, node_name=f"light{suffix}", geom_name=f"light{suffix}")
     return out
 
 
@@ -77,6 +84,10 @@ def light_marker_position(scene: Scene) -> np.ndarray:
 
 
 def write_glb(
-    path: Path, scene: Scene, hands: list[tuple[str, np.ndarray, np.ndarray]], shadow: np.ndarray | None
+    path: Path,
+    scene: Scene,
+    hands: list[tuple[str, np.ndarray, np.ndarray]],
+    shadow: np.ndarray | None,
+    more_views: Sequence[tuple[Scene, np.ndarray | None]] = (),
 ) -> None:
-    Path(path).write_bytes(scene_trimesh(scene, hands, shadow).export(file_type="glb"))
+    Path(path).write_bytes(scene_trimesh(scene, hands, shadow, more_views).export(file_type="glb"))

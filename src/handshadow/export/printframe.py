@@ -64,7 +64,13 @@ def load_result(result_dir: str | Path) -> ResultMeshes:
         raise PrintError(f"{folder} has no scene.json (print a folder written by 'handshadow fit' or 'render')")
     try:
         data = json.loads(scene_path.read_text())
+        if isinstance(data, list):
+            raise PrintError(
+                f"{scene_path} holds {len(data)} views: printing a result fitted to several views is not"
+                " supported (its stand is kept out of one lamp's picture only)"
+            )
         scene = Scene.from_json(data)
+
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise PrintError(f"{scene_path} is not valid JSON ({exc})") from None
     except SceneError as exc:

@@ -1,6 +1,7 @@
 """A pose file's hands as meshes, and the shadow they cast: the exact geometry of a result.
 
     meshes, mask = cast_shadow(posed_scene)   # [PosedMesh] float64 metres, (H, W) float mask
+    meshes, masks = cast_shadows(posed_scene) # ... and one (H, W) mask per view
 
 Vertices are rounded as the OBJ files store them, so the written shadow, the meshes and any
 independent recomputation from the files agree to the pixel.
@@ -72,6 +73,20 @@ def mesh_shadow(scene: Scene, meshes: list[PosedMesh]) -> np.ndarray:
 
 
 def cast_shadow(posed: PosedScene, mano_dir: str | None = None) -> tuple[list[PosedMesh], np.ndarray]:
-    """The meshes of a pose file and their exact shadow (H, W) float in its scene."""
+    """The meshes of a pose file and their exact shadow (H, W) float in its scene (view 0)."""
     meshes = pose_meshes(posed, mano_dir)
     return meshes, mesh_shadow(posed.scene, meshes)
+
+
+def cast_shadows(posed: PosedScene, mano_dir: str | None = None) -> tuple[list[PosedMesh], list[np.ndarray]]:
+    """The meshes of a pose file and their exact shadow (H, W) float in each of its views."""
+    meshes = pose_meshes(posed, mano_dir)
+    if len(posed.views) == 1:
+        return meshes, [mesh_shadow(posed.scene, meshes)]
+    masks = []
+    for k, scene in enumerate(posed.views):
+        try:
+            masks.append(mesh_shadow(scene, meshes))
+        except PlacementError as exc:
+            raise PlacementError(f"view {k}: {exc}") from None
+    return meshes, masks

@@ -1,7 +1,8 @@
 """The search, in small parts (no I/O here):
 
     problem.py    Problem: the target, the scene, the hands and their limits, fixed while a
-                  search runs; Level: the same at a stage's resolution
+                  search runs, and further views of the same pose (View); Level: the same
+                  at a stage's resolution
     objective.py  objective(): named loss terms (LossTerms) of hypotheses at a stage
     loop.py       optimise(): the one Adam loop
     starts.py     library poses and random hands, aligned to the target in 2D
@@ -12,13 +13,13 @@
 A hypothesis is one or two hands (poses.PoseBatch). Joint angles stay inside their limits by
 construction (poses.PoseParameters); rotations are a rotation vector applied in world axes on
 top of the start's rotation; translations are metres. Ranking is by the fit measures
-(metrics.rank_key).
+(metrics.rank_key; with several views metrics.ViewScores: every view's together).
 """
 
 from handshadow.search.config import Finishing, LearningRates, Reach, Stage, Weights
 from handshadow.search.finishing import Interrupted, keep_between_light_and_wall, polish, separate
-from handshadow.search.objective import LossTerms, objective
-from handshadow.search.problem import Level, Problem
+from handshadow.search.objective import LossTerms, objective, view_objective
+from handshadow.search.problem import Level, Problem, View, ViewTarget
 from handshadow.search.stages import Progress, SearchResult, run_stages
 
 __all__ = [
@@ -32,10 +33,13 @@ __all__ = [
     "Reach",
     "SearchResult",
     "Stage",
+    "View",
+    "ViewTarget",
     "Weights",
     "keep_between_light_and_wall",
     "objective",
     "polish",
     "run_stages",
     "separate",
+    "view_objective",
 ]

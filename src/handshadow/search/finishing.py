@@ -17,12 +17,12 @@ import numpy as np
 import torch
 
 from handshadow.hands.penetration import contact_penalty, hand_parts
-from handshadow.metrics import FitScore, rank_key, score
+from handshadow.metrics import ViewScores
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
 from handshadow.scene import RESULT_MARGIN_M
 from handshadow.search.config import Finishing
 from handshadow.search.loop import optimise
-from handshadow.search.objective import objective
+from handshadow.search.objective import view_objective
 from handshadow.search.problem import Problem
 
 log = logging.getLogger(__name__)
@@ -175,11 +175,12 @@ def polish(
     and far spills; the best-scoring pose met on the way wins, and only if it scores better
     than the start and overlaps no more. Rounds repeat from the best while the success test
     is not passed: ``rounds`` of them, then up to ``near_rounds`` more while the result is a
-    near miss (:attr:`FitScore.near_miss`) and the last round improved it. A start that
-    already passes is returned as it is unless ``always``."""
+    near miss (:attr:`ViewScores.near_miss`) and the last round improved it. A start that
+    already passes is returned as it is unless ``always``. Scores are every view's
+    (metrics.ViewScores)."""
     best = poses
     try:
-        best_score = score(problem.shadows(poses)[0].cpu().numpy() > 0.5, problem.target, problem.thin)
+        best_score = problem.scores(poses)[0]
         allowed = max(settings.tolerance_mm, problem.mesh_penetration(poses)[0].deepest_mm)
         generator = generator or torch.Generator(device="cpu").manual_seed(0)
         improved = False
@@ -190,7 +191,7 @@ def polish(
                 break
             previous = best_score
             best_score, best = polish_round(problem, best, best_score, settings, allowed, generator, stop)
-            improved = rank_key(best_score) < rank_key(previous)
+            improved = best_score.key() < previous.key()
     except KeyboardInterrupt:  # between steps, or while scoring the start
         raise Interrupted(best) from None
     return best
@@ -199,30 +200,29 @@ def polish(
 def polish_round(
     problem: Problem,
     poses: PoseBatch,
-    best_score: FitScore,
+    best_score: ViewScores,
     settings: Finishing,
     allowed_mm: float,
     generator: torch.Generator,
     stop: Callable[[], bool] | None = None,
-) -> tuple[FitScore, PoseBatch]:
+) -> tuple[ViewScores, PoseBatch]:
     """One round of the polish: (the best score met, its poses), the start's if none beat it."""
     stage = settings.stage(problem.height, settings.steps)
     weights = settings.polish_weights(problem.weights)
     params = PoseParameters(poses.repeat(settings.copies), problem.limits)
     jitter(params, settings.jitter, generator)
-    best = {"score": best_score, "key": rank_key(best_score), "poses": poses}
+    best = {"score": best_score, "key": best_score.key(), "poses": poses}
 
     def evaluate():
-        terms, shadow = objective(problem, params.hands(), stage, weights)
-        return terms.total, shadow.mask
+        terms, shadows = view_objective(problem, params.hands(), stage, weights)
+        return terms.total, shadows
 
-    def look(step, mask):
+    def look(step, shadows):
         if step % settings.check_every and step != settings.steps:
             return False
         current = params.poses()
-        for i, m in enumerate(mask.detach().cpu().numpy() > 0.5):
-            s = score(m, problem.target, problem.thin)
-            key = rank_key(s)
+        for i, s in enumerate(problem.judge([sh.mask.detach().cpu().numpy() > 0.5 for sh in shadows])):
+            key = s.key()
             # The exact mesh test only for a pose that would win: it is the costly part.
             if key < best["key"] and problem.mesh_penetration(current.item(i))[0].deepest_mm <= allowed_mm:
                 best.update(score=s, key=key, poses=current.item(i))
@@ -254,23 +254,18 @@ def jitter(params: PoseParameters, sigmas: tuple[float, float, float], generator
 def keep_between_light_and_wall(problem: Problem, poses: PoseBatch, margin_m: float = RESULT_MARGIN_M) -> PoseBatch:
     """The placement penalty is soft; if any vertex still comes within margin_m of the wall
     (or of the light's plane), move both hands along the wall normal just enough, so the
-    result is physical."""
-    n = torch.as_tensor(problem.scene.wall.normal, dtype=problem.dtype, device=problem.device)
-    w0 = torch.as_tensor(problem.scene.wall.point, dtype=problem.dtype, device=problem.device)
-    heights = torch.cat([((o.vertices - w0) @ n).flatten() for o in problem.pose(poses.hands)])
-    lo, hi = problem.scene.light_depth_range()
-    shift = 0.0
-    if float(heights.min()) < lo + margin_m:
-        shift = lo + margin_m - float(heights.min())
-    elif float(heights.max()) > hi - margin_m:
-        shift = hi - margin_m - float(heights.max())
-    if shift == 0.0:
-        return poses
-    log.info("moved the hands %.1f mm along the wall normal to keep them off the wall and the light", shift * 1000)
-    return PoseBatch([h.moved(shift * n) for h in poses.hands], poses.origins)
-
-
-def shadow_score(problem: Problem, poses: PoseBatch) -> tuple[np.ndarray, FitScore]:
-    """The full-resolution shadow (H, W) bool of a batch-1 pose and its measures."""
-    shadow = problem.shadows(poses)[0].cpu().numpy() > 0.5
-    return shadow, score(shadow, problem.target, problem.thin)
+    result is physical. With several views, each view in turn (its own wall's normal)."""
+    for view in problem.views:
+        n = torch.as_tensor(view.scene.wall.normal, dtype=problem.dtype, device=problem.device)
+        w0 = torch.as_tensor(view.scene.wall.point, dtype=problem.dtype, device=problem.device)
+        heights = torch.cat([((o.vertices - w0) @ n).flatten() for o in problem.pose(poses.hands)])
+        lo, hi = view.scene.light_depth_range()
+        shift = 0.0
+        if float(heights.min()) < lo + margin_m:
+            shift = lo + margin_m - float(heights.min())
+        elif float(heights.max()) > hi - margin_m:
+            shift = hi - margin_m - float(heights.max())
+        if shift != 0.0:
+            log.info("moved the hands %.1f mm along a wall's normal to keep them off it and its light", shift * 1000)
+            poses = PoseBatch([h.moved(shift * n) for h in poses.hands], poses.origins)
+    return poses

@@ -2,11 +2,14 @@
 
     terms, shadow = objective(problem, hands, stage)   # LossTerms of (B,) tensors, Shadow
     terms.total                                       # (B,) what the optimiser minimises
+    terms, shadows = view_objective(problem, hands, stage)   # every view's Shadow
 
 The image term is the paper's L2 between the (blurred) shadow and target, weighted toward thin
 parts and toward depth inside the target; the others pull the outline and the skeleton toward
 what is missing, push back spills and light leaking between fingers, and keep the hands
-physical (proxies apart, between lamp and wall, within one person's reach). Each term's
+physical (proxies apart, between lamp and wall, within one person's reach). With several
+views (one pose, a lamp and wall per target) each view's image terms count by its weight and
+the physical rules hold in every view. Each term's
 function is in :mod:`handshadow.losses`; the weights are :class:`~handshadow.search.config.Weights`.
 """
 
@@ -22,6 +25,7 @@ from handshadow.hands.kinematics import rotmat_to_rotvec
 from handshadow.hands.rig import KEYPOINT_NAMES
 from handshadow.poses import HandPoseBatch
 from handshadow.render import Shadow, gaussian_blur
+from handshadow.scene import Scene
 from handshadow.search.config import Stage, Weights
 from handshadow.search.problem import Level, Problem
 
@@ -66,10 +70,68 @@ def objective(
     problem: Problem, hands: list[HandPoseBatch], stage: Stage, weights: Weights | None = None
 ) -> tuple[LossTerms, Shadow]:
     """The loss terms of B hypotheses (one HandPoseBatch per hand slot, differentiable) at a
-    stage, and their exact shadow at the stage's resolution."""
+    stage, and their exact shadow at the stage's resolution in view 0 (every view's:
+    :func:`view_objective`)."""
+    terms, shadows = view_objective(problem, hands, stage, weights)
+    return terms, shadows[0]
+
+
+def view_objective(
+    problem: Problem, hands: list[HandPoseBatch], stage: Stage, weights: Weights | None = None
+) -> tuple[LossTerms, list[Shadow]]:
+    """The loss terms of B hypotheses at a stage over all the problem's views, and their exact
+    shadow per view at the stage's resolution. The image terms (image, excess, gaps,
+    attraction, inside, thin_pull) are each view's weighted by its weight; placement and the
+    arms' rules hold in every view (summed); penetration, reach and the anchor are counted
+    once. With one view this is the single-view objective exactly (its terms are built in
+    the same order, so even the gradients' rounding is the same)."""
     w = weights or problem.weights
-    level = problem.level(stage.height)
     outs = problem.pose(hands)
+    levels = [problem.level(stage.height, k) for k in range(len(problem.views))]
+    views = [_view_image_terms(level, outs, stage, w) for level in levels]
+    shadows = [shadow for _, shadow in views]
+    zero = shadows[0].mask.new_zeros(shadows[0].mask.shape[0])
+    anchor = w.anchor * anchor_distance(hands, problem.anchor.hands) if problem.anchor is not None else zero
+    with_forearm, elbows = _elbows(hands, outs)
+    reach = _reach_term(problem, hands, elbows, w)
+    no_arms = hands[0].translation.new_zeros(hands[0].batch)
+    arms = _summed(
+        [_arms_term(problem, v.scene, lv, with_forearm, elbows, no_arms, w) for v, lv in zip(problem.views, levels)]
+    )
+    for (terms, shadow), level in zip(views, levels):
+        terms["excess"] = w.excess * losses.excess(shadow.mask, level.maps.outside_dist)
+    penetration = w.penetration * losses.penetration(problem.proxy_depths(hands, outs))
+    placement = _summed(
+        [w.placement * losses.placement(s.heights, *v.placement_range) for s, v in zip(shadows, problem.views)]
+    )
+    image_terms = {
+        name: views[0][0][name]
+        if len(views) == 1
+        else _summed([v.weight * terms[name] for v, (terms, _) in zip(problem.views, views)])
+        for name in IMAGE_TERMS
+    }
+    terms = LossTerms(
+        **image_terms, anchor=anchor, penetration=penetration, placement=placement, reach=reach, arms=arms
+    )
+    return terms, shadows
+
+
+# The terms each view weighs by its weight (the rest are physical rules or counted once).
+IMAGE_TERMS = ("image", "excess", "gaps", "attraction", "inside", "thin_pull")
+
+
+def _summed(values: list[torch.Tensor]) -> torch.Tensor:
+    """The sum of (B,) terms, the first as it is when it is alone."""
+    out = values[0]
+    for v in values[1:]:
+        out = out + v
+    return out
+
+
+def _view_image_terms(level: Level, outs, stage: Stage, w: Weights) -> tuple[dict[str, torch.Tensor], Shadow]:
+    """One view's image terms but the excess (image, gaps, attraction, inside, thin_pull,
+    each (B,) and weighted as Weights says, not by the view's weight) and its exact shadow at
+    the level's resolution."""
     shadow = level.renderer.render([o.vertices for o in outs])
     mask, maps = shadow.mask, level.maps
     zero = mask.new_zeros(mask.shape[0])
@@ -85,33 +147,20 @@ def objective(
     if stage.skeleton > 0:
         inside, thin_pull = _skeleton_terms(level, outs)
         inside, thin_pull = stage.skeleton * w.inside * inside, stage.skeleton * w.thin_pull * thin_pull
-    anchor = w.anchor * anchor_distance(hands, problem.anchor.hands) if problem.anchor is not None else zero
-    reach, arms = _arm_terms(problem, level, hands, outs, w)
-    terms = LossTerms(
-        image=image,
-        excess=w.excess * losses.excess(mask, maps.outside_dist),
-        gaps=gaps,
-        attraction=attraction,
-        inside=inside,
-        thin_pull=thin_pull,
-        anchor=anchor,
-        penetration=w.penetration * losses.penetration(problem.proxy_depths(hands, outs)),
-        placement=w.placement * losses.placement(shadow.heights, *problem.placement_range),
-        reach=reach,
-        arms=arms,
-    )
-    return terms, shadow
+    return {"image": image, "gaps": gaps, "attraction": attraction, "inside": inside, "thin_pull": thin_pull}, shadow
 
 
-def _arm_terms(problem: Problem, level: Level, hands, outs, w: Weights) -> tuple[torch.Tensor, torch.Tensor]:
-    """(reach, arms) weighted (B,) terms (hands.arms): wrists and elbows within the performers'
-    reach; forearms leading back toward the performer (no elbow nearer the wall than its
-    wrist), and, when Weights.elbows_out is set, every elbow's shadow out of the picture."""
-    r = problem.reach
-    zero = hands[0].translation.new_zeros(hands[0].batch)
+def _elbows(hands, outs) -> tuple[list, list[torch.Tensor]]:
+    """The hands that have forearms as (HandPoseBatch, HandOutput) pairs, and their elbows
+    (B, 3) each."""
     with_forearm = [(h, o) for h, o in zip(hands, outs) if o.forearm_points.shape[1]]
-    elbows = [o.forearm_points[:, -1] for _, o in with_forearm]
-    reach = arms = zero
+    return with_forearm, [o.forearm_points[:, -1] for _, o in with_forearm]
+
+
+def _reach_term(problem: Problem, hands, elbows: list[torch.Tensor], w: Weights) -> torch.Tensor:
+    """Weighted (B,) term (hands.arms): wrists and elbows within the performers' reach."""
+    r = problem.reach
+    reach = hands[0].translation.new_zeros(hands[0].batch)
     if len(hands) == 2:
         gap = (hands[0].translation - hands[1].translation).norm(dim=1)
         reach = losses.soft_range(gap, 0.0, r.max_wrist_gap_m, r.margin_m)
@@ -119,8 +168,20 @@ def _arm_terms(problem: Problem, level: Level, hands, outs, w: Weights) -> tuple
             span = (elbows[0] - elbows[1]).norm(dim=1)
             reach = reach + losses.soft_range(span, 0.0, r.max_elbow_span_m, r.margin_m)
         reach = w.reach * reach
+    return reach
+
+
+def _arms_term(
+    problem: Problem, scene: Scene, level: Level, with_forearm, elbows: list[torch.Tensor], zero, w: Weights
+) -> torch.Tensor:
+    """Weighted (B,) term (hands.arms) in one view: forearms leading back toward the
+    performer (no elbow nearer the view's wall than its wrist), and, when Weights.elbows_out
+    is set, every elbow's shadow out of the view's picture. with_forearm, elbows: _elbows();
+    zero: (B,) zeros."""
+    r = problem.reach
+    arms = zero
     if elbows and w.arms:
-        normal = torch.as_tensor(problem.scene.wall.normal, dtype=zero.dtype, device=zero.device)
+        normal = torch.as_tensor(scene.wall.normal, dtype=arms.dtype, device=arms.device)
         for (h, _), elbow in zip(with_forearm, elbows):
             toward_wall = ((h.translation - elbow) @ normal) - BACK_SLACK_M  # wrist's height minus elbow's
             arms = arms + w.arms * (torch.relu(toward_wall) / r.margin_m) ** 2
@@ -128,7 +189,7 @@ def _arm_terms(problem: Problem, level: Level, hands, outs, w: Weights) -> tuple
         xy, _ = level.scene.project(torch.stack(elbows, 1))
         height, width = level.scene.image.height, level.scene.image.width
         arms = arms + w.elbows_out * losses.inside_frame(xy, height, width, r.elbow_margin_share * height)
-    return reach, arms
+    return arms
 
 
 def _image_maps(level: Level, blur: float, w: Weights) -> tuple[torch.Tensor, torch.Tensor]:

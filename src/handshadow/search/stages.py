@@ -11,11 +11,11 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
-from handshadow.metrics import iou, rank, rank_key, score
+from handshadow.metrics import iou
 from handshadow.poses import PoseBatch, PoseParameters
 from handshadow.search.config import Stage
 from handshadow.search.loop import optimise
-from handshadow.search.objective import objective
+from handshadow.search.objective import view_objective
 from handshadow.search.problem import Problem
 
 log = logging.getLogger(__name__)
@@ -24,8 +24,9 @@ log = logging.getLogger(__name__)
 @dataclasses.dataclass
 class Progress:
     """What a progress callback sees: stage index, step within it, steps done over all stages,
-    their total, the best hypothesis's current shadow (H, W) numpy at the stage resolution,
-    its IoU, its poses (PoseBatch of batch 1) and its loss terms by name."""
+    their total, the best hypothesis's current shadow (H, W) numpy at the stage resolution
+    (view 0's), its IoU, its poses (PoseBatch of batch 1), its loss terms by name, and with
+    several views the other views' shadows (H, W) at the stage resolution."""
 
     stage: int
     step: int
@@ -35,6 +36,7 @@ class Progress:
     iou: float
     poses: PoseBatch
     terms: dict[str, float] = dataclasses.field(default_factory=dict)
+    more_shadows: tuple[np.ndarray, ...] = ()
 
 
 @dataclasses.dataclass
@@ -75,8 +77,8 @@ def run_stages(
             params = PoseParameters(poses, problem.limits)
 
             def evaluate(stage=stage, params=params):
-                terms, shadow = objective(problem, params.hands(), stage)
-                return terms.total, (terms, shadow)
+                terms, shadows = view_objective(problem, params.hands(), stage)
+                return terms.total, (terms, shadows)
 
             def after(step, seen, si=si, stage=stage, params=params):
                 nonlocal done
@@ -109,26 +111,30 @@ def run_stages(
     return SearchResult(poses.item(ranking[0]["index"]), done, time.perf_counter() - t0, interrupted, ranking)
 
 
-def _progress(problem, params, stage, si, step, done, total, terms, shadow) -> Progress:
+def _progress(problem, params, stage, si, step, done, total, terms, shadows) -> Progress:
     loss = terms.total.detach()
     best = int(torch.argmin(loss))
-    m = shadow.mask[best].detach().cpu().numpy()
+    m = shadows[0].mask[best].detach().cpu().numpy()
     target = problem.level(stage.height).maps.target.cpu().numpy() > 0.5
-    return Progress(si, step, done, total, m, iou(m > 0.5, target), params.poses().item(best), terms.values(best))
+    more = tuple(s.mask[best].detach().cpu().numpy() for s in shadows[1:])
+    poses = params.poses().item(best)
+    return Progress(si, step, done, total, m, iou(m > 0.5, target), poses, terms.values(best), more)
 
 
 def rank_at(problem: Problem, poses: PoseBatch, height: int) -> list[int]:
-    """Hypotheses' indices, best first, by the fit measures at a frame height."""
-    masks = problem.shadows(poses, height).cpu().numpy() > 0.5
-    target = problem.level(height).maps.target.cpu().numpy() > 0.5
-    return rank(masks, target)
+    """Hypotheses' indices, best first, by the fit measures at a frame height (every view's,
+    metrics.ViewScores)."""
+    keys = [s.key() for s in problem.scores(poses, height)]
+    return sorted(range(poses.batch), key=keys.__getitem__)
 
 
 def rank_details(problem: Problem, poses: PoseBatch) -> list[dict]:
-    """Per hypothesis at full resolution: index, measures and rank key, best first."""
-    masks = problem.shadows(poses).cpu().numpy() > 0.5
+    """Per hypothesis at full resolution: index, view 0's measures, rank key (every view's)
+    and, with several views, each view's measures under "views"; best first."""
     rows = []
-    for i, m in enumerate(masks):
-        s = score(m, problem.target, problem.thin)
-        rows.append({"index": i, **s.as_dict(), "key": rank_key(s)})
+    for i, s in enumerate(problem.scores(poses)):
+        row = {"index": i, **s.scores[0].as_dict(), "key": s.key()}
+        if len(s.scores) > 1:
+            row["views"] = [v.as_dict() for v in s.scores]
+        rows.append(row)
     return sorted(rows, key=lambda r: r["key"])

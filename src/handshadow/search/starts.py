@@ -283,30 +283,27 @@ def choose_starts(
     each aligned to the target in 2D, the best ``n_keep`` by IoU (at most PER_LIBRARY_POSE
     from any one library pose and ATLAS_SHARE from the atlas, so the starts stay diverse). ``given`` starts (one PoseBatch,
     e.g. a morph's other end) are always kept, both as given and aligned.
+    With several views each candidate is also turned about the vertical (:func:`view_turns_rad`),
+    each is aligned to each view's target in turn and judged in every view
+    (:func:`views_start_score`); the atlas answers view 0's target.
+
     problem: a search.problem.Problem; returns a PoseBatch on its device, with origins."""
+
     parts = [
         library_starts(len(sides), sides, exclude=exclude),
         random_starts(n_random, sides, problem.limits, rng),
     ]
     if atlas is not None:
         parts.append(atlas_starts(atlas, problem.level(ALIGN_FRAME_PX).maps.target.cpu(), sides, problem.scene))
+    turns = view_turns_rad(problem)
+    if len(turns) > 1:  # several views: each candidate also turned toward the other lamps
+        parts = [turned_about_vertical(PoseBatch.cat(parts), a) for a in turns]
     if given is not None:
         parts.append(given.detach().to("cpu").with_origins([Origin("given")] * given.batch))
     cand = PoseBatch.cat(parts).to(problem.device)
-    scene = problem.scene
-    point = scene.light.type == "point"
-    target = problem.level(ALIGN_FRAME_PX).maps.target.cpu()
-    angle, scale, shift, _ = similarity_align(
-        problem.shadows(cand, ALIGN_FRAME_PX).cpu(),
-        target,
-        pivot_pixel(scene, ALIGN_FRAME_PX),
-        ALIGN_ANGLES_DEG,
-        ALIGN_SCALES if point else np.array([1.0]),
-    )
-    if not point:
-        scale = torch.ones_like(scale)
-    moved = apply_similarity(cand.to("cpu"), angle, scale, shift, scene, ALIGN_FRAME_PX).to(problem.device)
-    overlap = start_score(problem.shadows(moved, ALIGN_FRAME_PX).cpu(), problem.level(ALIGN_FRAME_PX).maps)
+    # Aligned to each view in turn (view 0's first), judged in every view (weighted).
+    moved = PoseBatch.cat([align_to_view(problem, cand, k) for k in range(len(problem.views))])
+    overlap = views_start_score(problem, moved)
     order = torch.argsort(overlap, descending=True).tolist()
     picked = list(range(cand.batch - given.batch, cand.batch)) if given is not None else []  # aligned
     per_pose: dict[str, int] = {}
@@ -405,3 +402,61 @@ def _warp_each(masks, angle, scale, shift, pivot) -> torch.Tensor:
         rot = torch.tensor([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]], dtype=masks.dtype)
         out.append(_warp(masks[k : k + 1], rot, scale[k : k + 1], shift[k : k + 1], pivot))
     return torch.cat(out)
+
+
+def align_to_view(problem, cand: PoseBatch, view: int = 0) -> PoseBatch:
+    """Candidates (a PoseBatch on the problem's device) moved so that their shadows in one of
+    the problem's views best match its target in 2D (similarity_align, apply_similarity)."""
+    scene = problem.views[view].scene
+    point = scene.light.type == "point"
+    target = problem.level(ALIGN_FRAME_PX, view).maps.target.cpu()
+    angle, scale, shift, _ = similarity_align(
+        problem.shadows(cand, ALIGN_FRAME_PX, view).cpu(),
+        target,
+        pivot_pixel(scene, ALIGN_FRAME_PX),
+        ALIGN_ANGLES_DEG,
+        ALIGN_SCALES if point else np.array([1.0]),
+    )
+    if not point:
+        scale = torch.ones_like(scale)
+    return apply_similarity(cand.to("cpu"), angle, scale, shift, scene, ALIGN_FRAME_PX).to(problem.device)
+
+
+def views_start_score(problem, poses: PoseBatch) -> torch.Tensor:
+    """(B,) :func:`start_score` at ALIGN_FRAME_PX in every view of the problem, weighted by
+    the views' weights (view 0's alone with one view)."""
+    scores = [
+        start_score(problem.shadows(poses, ALIGN_FRAME_PX, k).cpu(), problem.level(ALIGN_FRAME_PX, k).maps)
+        for k in range(len(problem.views))
+    ]
+    if len(scores) == 1:
+        return scores[0]
+    return sum(v.weight * s for v, s in zip(problem.views, scores))
+
+
+def view_turns_rad(problem) -> list[float]:
+    """The turns about the vertical (+y, radians) tried on every candidate: none with one
+    view; with more, also half and all of each further view's turn from view 0. Candidates
+    are mostly held toward view 0's lamp, their forearms hidden behind the hands; turned by
+    half, the forearms point between the lamps, where a performer lit by both stands."""
+    turns = [0.0]
+    n0 = np.asarray(problem.views[0].scene.wall.normal, float)
+    for view in problem.views[1:]:
+        n = np.asarray(view.scene.wall.normal, float)
+        angle = math.atan2(float(np.cross(n0, n)[1]), float(n0 @ n))
+        turns += [angle / 2, angle]
+    return turns
+
+
+def turned_about_vertical(poses: PoseBatch, angle_rad: float) -> PoseBatch:
+    """Each hypothesis turned by angle_rad about the vertical (+y) through its wrists' mean
+    (positive: from +z toward +x, as scene.Scene.turned)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    dtype = poses.hands[0].rotation.dtype
+    rot = torch.tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]], dtype=dtype, device=poses.hands[0].rotation.device)
+    centre = torch.stack([h.translation for h in poses.hands]).mean(0)
+    hands = [
+        HandPoseBatch(h.pose_rad, rot @ h.rotation, (h.translation - centre) @ rot.T + centre, h.wrist_rad)
+        for h in poses.hands
+    ]
+    return PoseBatch(hands, poses.origins)
