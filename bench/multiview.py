@@ -141,7 +141,6 @@ def art_pairs(folder: Path, n: int) -> list[tuple[Path, Path]]:
     return list(zip(spread[:n], spread[n:]))
 
 
-
 def run(kind: str, name: str, targets: list[np.ndarray], config: FitConfig) -> dict:
     """A two-view fit and a single-view fit of view 0's target, timed; a printed row."""
     t0 = time.perf_counter()

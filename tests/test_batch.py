@@ -168,7 +168,9 @@ def test_a_rerun_goes_on_and_a_killed_worker_loses_nothing(resumed):
         fit = json.loads((out / name / "pose.json").read_text())["fit"]
         assert float(on_disk[name]["iou"]) == fit["iou"] and on_disk[name]["worker"].startswith("tcp://127.0.0.1:")
     page = (out / "index.html").read_text()
-    assert page.index("bad.png is not a readable image") < min(page.index(f'href="{n}/"') for n in NAMES)  # failures first
+    assert page.index("bad.png is not a readable image") < min(
+        page.index(f'href="{n}/"') for n in NAMES
+    )  # failures first
     for name in NAMES:
         for picture in ("target.png", "shadow.png", "overlay.png"):
             assert f'src="{name}/{picture}"' in page

@@ -233,7 +233,6 @@ def _scripted_rounds(monkeypatch, hd95s):
         played.append(hd95s[len(played)])
         return ViewScores((FitScore(iou=0.9, boundary_f1=0.5, hd95=played[-1], thin_recall=0.9),), (1.0,)), poses
 
-
     monkeypatch.setattr(finishing, "polish_round", round_)
     return played
 

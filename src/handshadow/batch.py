@@ -161,9 +161,7 @@ def find_targets(inputs: Iterable[str]) -> list[Target]:
 
 def _expand(path: Path, explicit: bool = True) -> list[str]:
     if path.is_dir():
-        images = sorted(
-            str(p) for p in path.iterdir() if p.suffix.lower() in EXTENSIONS and not p.name.startswith(".")
-        )
+        images = sorted(str(p) for p in path.iterdir() if p.suffix.lower() in EXTENSIONS and not p.name.startswith("."))
         if not images and explicit:
             raise BatchError(f"no images ({', '.join(EXTENSIONS)}) in folder {path}")
         return images

@@ -358,7 +358,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("inputs", nargs="+", metavar="INPUT", help="image files, folders of images, globs or example names")
     p.add_argument("--out", required=True, help="output folder: OUT/NAME/ per target, summary.csv, index.html")
     p.add_argument("--workers", type=int, help="local cluster: worker processes (default: fitted to cores and memory)")
-    p.add_argument("--threads-per-worker", type=int, help="local cluster: threads (torch threads) per worker (default 1)")
+    p.add_argument(
+        "--threads-per-worker", type=int, help="local cluster: threads (torch threads) per worker (default 1)"
+    )
     p.add_argument("--scheduler", metavar="ADDRESS", help="use an existing Dask cluster, e.g. tcp://HOST:8786")
     p.add_argument("--dashboard", action="store_true", help="serve the Dask dashboard (needs bokeh)")
     _add_fit_options(p, force_help="fit again the targets whose folders are complete")

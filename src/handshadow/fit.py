@@ -63,7 +63,6 @@ VIEWS_SETTLE_STEPS = {"fast": 60, "default": 80, "best": 100}
 VIEWS_POLISH_ROUNDS = {"fast": (2, 0), "default": (4, 4), "best": (6, 6)}
 
 
-
 @dataclasses.dataclass(frozen=True)
 class FitConfig:
     """Everything a fit needs besides the target.
