@@ -140,6 +140,7 @@ class FitOptions:
     light: str = "point"
     size: int = 256
     invert: bool = False
+    view_angle: float = 90.0  # degrees between the two lamps when a second shadow is asked for
 
 
 @dataclasses.dataclass(frozen=True)
@@ -226,27 +227,31 @@ def enlarged(image: np.ndarray, rows: int = PREVIEW_ROWS) -> np.ndarray:
     return np.repeat(np.repeat(image, k, axis=0), k, axis=1)
 
 
-def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[FitUpdate]:
+def fit_steps(session: Session, source: str | list[str], options: FitOptions) -> Iterator[FitUpdate]:
     """A fit for the page: a live preview while it searches, then the result's overlay, folder
-    and zip. Cancel (the session's event) keeps the best so far. Errors end it with their message."""
+    and zip. Cancel (the session's event) keeps the best so far. Errors end it with their message.
+    Two sources (the front shadow and a second one, from the side) fit one pose to two views,
+    the second lamp turned by options.view_angle degrees; the overlays show side by side."""
     import imageio.v3 as iio
 
     from handshadow.cli import performance_lines
     from handshadow.examples import target_path
     from handshadow.export.images import overlay_preview
     from handshadow.fit import FitConfig
-    from handshadow.pipeline import fit_to_folder
+    from handshadow.pipeline import fit_to_folder, view_name
     from handshadow.target import read_target
 
     session.cancel.clear()
     folder = session.new_job("fit")
     invert = options.invert or None
+    sources = [source] if isinstance(source, str) else list(source)
     try:
-        target = read_target(target_path(source), options.size, options.size, invert)
+        targets = [read_target(target_path(s), options.size, options.size, invert) for s in sources]
     except HandshadowError as exc:
-        yield FitUpdate(None, f"**Cannot use this picture:** {in_words(exc, source)}")
+        yield FitUpdate(None, f"**Cannot use this picture:** {in_words(exc, *sources)}")
         return
-    note = f"  \n**Warning:** {target.warning}" if target.warning else ""
+    target = targets[0]
+    note = "".join(f"  \n**Warning:** {t.warning}" for t in targets if t.warning)
     config = FitConfig(
         hands=options.hands,
         quality=options.quality,
@@ -254,11 +259,18 @@ def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[Fi
         light=options.light,
         size=options.size,
         device="auto",
+        view_angle_deg=options.view_angle,
     )
 
     def work(report, stop):
         return fit_to_folder(
-            source, folder / "result", config, invert=invert, show_progress=False, progress_hook=report, stop=stop
+            sources if len(sources) > 1 else sources[0],
+            folder / "result",
+            config,
+            invert=invert,
+            show_progress=False,
+            progress_hook=report,
+            stop=stop,
         )
 
     job = Job(work, session.cancel).start()
@@ -274,7 +286,7 @@ def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[Fi
     try:
         result_folder, result, lines = job.outcome()
     except Exception as exc:  # a fit's error, in words
-        yield FitUpdate(None, f"**The fit stopped:** {in_words(exc, source)}")
+        yield FitUpdate(None, f"**The fit stopped:** {in_words(exc, *sources)}")
         return
     yield FitUpdate(None, "Making the model to 3D-print..." + note, fraction=1.0)
     printed = printable(result_folder)
@@ -288,8 +300,24 @@ def fit_steps(session: Session, source: str, options: FitOptions) -> Iterator[Fi
         + "\n\n"
         + "\n".join(line.strip() for line in [*performance_lines(result), *lines])
     )
-    overlay = enlarged(iio.imread(result_folder / "overlay.png"))
-    yield FitUpdate(overlay, status, {"folder": str(result_folder), "zip": zip_path})
+    n = len(sources)
+    overlays = [enlarged(iio.imread(result_folder / view_name("overlay", k, n))) for k in range(n)]
+    finished = {"folder": str(result_folder), "zip": zip_path, "views": n}
+    if n > 1:  # the shadows side by side, for the page only (the folder keeps one file per view)
+        shadows = [iio.imread(result_folder / view_name("shadow", k, n)) for k in range(n)]
+        finished["shadow"] = str(folder / "shadows.png")
+        iio.imwrite(finished["shadow"], side_by_side(shadows))
+    yield FitUpdate(side_by_side(overlays), status, finished)
+
+
+def side_by_side(images: list[np.ndarray], gap: int = 8) -> np.ndarray:
+    """Pictures of one height (H, W[, 3]) uint8 in a row, ``gap`` white pixels between them."""
+    images = [np.repeat(i[..., None], 3, -1) if i.ndim == 2 else i[..., :3] for i in images]
+    space = np.full((images[0].shape[0], gap, 3), 255, np.uint8)
+    row = [images[0]]
+    for image in images[1:]:
+        row += [space, image]
+    return np.concatenate(row, 1)
 
 
 def printable(result_folder: Path) -> str:
@@ -307,8 +335,9 @@ def printable(result_folder: Path) -> str:
 def result_files(finished: dict) -> tuple[str, ...]:
     """The result's files for the page: shadow, 3D hands, guide, pose, zip, search GIF."""
     folder = Path(finished["folder"])
-    names = ("shadow.png", "hands.glb", "guide.png", "pose.json")
-    return (*(str(folder / n) for n in names), finished["zip"], str(folder / "progress.gif"))
+    shadow = finished.get("shadow") or str(folder / "shadow.png")
+    names = ("hands.glb", "guide.png", "pose.json")
+    return (shadow, *(str(folder / n) for n in names), finished["zip"], str(folder / "progress.gif"))
 
 
 def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size: int):
@@ -345,6 +374,10 @@ class ShadowTab:
     example: object
     upload: object
     drawing: object
+    second_source: object
+    second_example: object
+    second_upload: object
+    view_angle: object
     reading: object
     hands: object
     quality: object
@@ -365,7 +398,10 @@ class ShadowTab:
     finished: object
 
     def options(self) -> list:
-        return [self.hands, self.quality, self.limits, self.light, self.size, self.invert]
+        return [self.hands, self.quality, self.limits, self.light, self.size, self.invert, self.view_angle]
+
+    def second(self) -> list:
+        return [self.second_source, self.second_upload, self.second_example]
 
     def results(self) -> list:
         return [self.shadow, self.model, self.guide, self.pose_file, self.zip_file, self.progress_gif]
@@ -388,10 +424,15 @@ class MorphTab:
     zip_file: object
 
 
-def _sources(gr, label: str, choices: list[str], examples: list[str], value: str | None, prefix: str):
-    """(source radio, example dropdown, upload) for one shape to choose."""
-    source = gr.Radio(choices, value="Example", label=label, elem_id=f"{prefix}source")
-    example = gr.Dropdown(examples, value=value, label="Example", elem_id=f"{prefix}example")
+def _sources(
+    gr, label: str, choices: list[str], examples: list[str], value: str | None, prefix: str, chosen: str = "Example"
+):
+    """(source radio, example dropdown, upload) for one shape to choose; ``chosen``: the radio's
+    first choice."""
+    source = gr.Radio(choices, value=chosen, label=label, elem_id=f"{prefix}source")
+    example = gr.Dropdown(
+        examples, value=value, label="Example", visible=chosen == "Example", elem_id=f"{prefix}example"
+    )
     upload = gr.Image(
         label="Your picture: a shape on a plain ground, or a photo of a shadow on a wall",
         type="filepath",
@@ -434,6 +475,27 @@ def _fit_options(gr) -> dict:
         }
 
 
+def _second_shadow(gr, example_names: list[str]) -> dict:
+    """The optional second target: one pose casting two shadows, the second lamp to the side."""
+    from handshadow.scene import VIEW_ANGLE_MAX_DEG, VIEW_ANGLE_MIN_DEG
+
+    c = {}
+    with gr.Accordion("A second shadow, from the side (optional)", open=False):
+        c["second_source"], c["second_example"], c["second_upload"] = _sources(
+            gr, "Second shadow", ["None", "Example", "Upload"], example_names, None, "second-", chosen="None"
+        )
+        c["view_angle"] = gr.Slider(
+            VIEW_ANGLE_MIN_DEG,
+            VIEW_ANGLE_MAX_DEG,
+            value=90,
+            step=5,
+            label="Angle between the two lamps (degrees)",
+            info="the second lamp and wall turned about the hands; 90 as in classic shadow sculptures",
+            elem_id="view-angle",
+        )
+    return c
+
+
 def _shape_column(gr, example_names: list[str]) -> dict:
     """Left: the shape, the options, Fit and Cancel, the status line, the reading, the guide."""
     c = {}
@@ -450,6 +512,7 @@ def _shape_column(gr, example_names: list[str]) -> dict:
         visible=False,
         elem_id="sketchpad",
     )
+    c.update(_second_shadow(gr, example_names))
     c.update(_fit_options(gr))
     with gr.Row():
         c["fit"] = gr.Button("Fit", variant="primary", elem_id="fit")
@@ -568,14 +631,24 @@ def build_app(store: SessionStore | None = None):
             return None, DRAW
         return read_for_page(chosen(source, upload, example), invert, int(size))
 
-    def on_fit(source, upload, drawing, example, hands, quality, limits, light, size, invert, request: gr.Request,
+    def on_fit(source, upload, drawing, example, second_source, second_upload, second_example, hands, quality,
+               limits, light, size, invert, view_angle, request: gr.Request,
                progress=gr.Progress()):  # noqa: B008  # fmt: skip
         session = session_of(request)
         options = FitOptions(
-            hands=hands, quality=quality, limits=limits, light=light, size=int(size), invert=bool(invert)
+            hands=hands,
+            quality=quality,
+            limits=limits,
+            light=light,
+            size=int(size),
+            invert=bool(invert),
+            view_angle=float(view_angle),
         )
         try:
             target = target_source(source, upload, drawing, example, session.new_job("input"))
+            if second_source != "None":
+                second = target_source(second_source, second_upload, None, second_example, session.new_job("second"))
+                target = [target, second]
         except ValueError as exc:
             yield None, f"**Nothing to fit:** {exc}", None
             return
@@ -610,6 +683,12 @@ def build_app(store: SessionStore | None = None):
         shadow, morph = layout(gr, [name for name, _ in examples.list_targets()])
         picked = [shadow.source, shadow.upload, shadow.example, shadow.invert, shadow.size]
         shadow.source.change(show_source, shadow.source, [shadow.example, shadow.upload, shadow.drawing], queue=False)
+        shadow.second_source.change(
+            lambda c: [gr.update(visible=c == "Example"), gr.update(visible=c == "Upload")],
+            shadow.second_source,
+            [shadow.second_example, shadow.second_upload],
+            queue=False,
+        )
         gr.on(  # one listener for all: its runs follow each other, the last choice is the one shown
             [demo.load, *(component.change for component in picked)],
             show_reading,
@@ -620,7 +699,7 @@ def build_app(store: SessionStore | None = None):
         )
         shadow.fit.click(lambda: [None] * 6, outputs=shadow.results(), queue=False).then(
             on_fit,
-            [shadow.source, shadow.upload, shadow.drawing, shadow.example, *shadow.options()],
+            [shadow.source, shadow.upload, shadow.drawing, shadow.example, *shadow.second(), *shadow.options()],
             [shadow.preview, shadow.status, shadow.finished],
             concurrency_limit=1,  # one fit at a time uses every core; other visitors wait in line
         ).then(on_result, shadow.finished, shadow.results())

@@ -123,3 +123,30 @@ def test_importing_the_app_changes_no_environment():
     run = _python(code, env)
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip() == "[]"
+
+
+def test_a_second_shadow_fits_one_pose_to_two_views():
+    from handshadow.app import FitOptions, fit_steps, result_files
+
+    store = SessionStore()
+    try:
+        session = store.get("artist")
+        options = FitOptions(hands="1", quality="fast", size=64, view_angle=90.0)
+        updates = list(fit_steps(session, ["rabbit", "bird"], options))
+        last = updates[-1]
+        assert last.finished is not None, last.status
+        folder = last.finished["folder"]
+        for k in (0, 1):  # one file per view in the result folder
+            for stem in ("target", "shadow", "overlay"):
+                assert os.path.exists(f"{folder}/{stem}_{k}.png")
+        # the page shows both overlays, and both shadows, side by side
+        overlay_0 = iio.imread(f"{folder}/overlay_0.png")
+        assert last.preview.shape[1] > 2 * last.preview.shape[0] * overlay_0.shape[1] // overlay_0.shape[0] - 1
+        shadows = iio.imread(result_files(last.finished)[0])
+        left = iio.imread(f"{folder}/shadow_0.png")
+        right = iio.imread(f"{folder}/shadow_1.png")
+        assert np.array_equal(shadows[:, : left.shape[1]], left if left.ndim == 3 else np.stack([left] * 3, -1))
+        assert np.array_equal(shadows[:, -right.shape[1] :], right if right.ndim == 3 else np.stack([right] * 3, -1))
+        assert "View 1" in last.status  # how each shadow came out, and what it misses
+    finally:
+        store.close()
