@@ -121,8 +121,8 @@ def main() -> None:
 def largest_hole_share(path: Path) -> float:
     """The largest hole of a written target frame (a background region that does not reach
     the frame's edge) as a share of the frame's area; 0 without holes."""
-    shape = iio.imread(path)
-    shape = (shape if shape.ndim == 2 else shape[..., :3].mean(-1)) > 127
+    grey = iio.imread(path)
+    shape = (grey if grey.ndim == 2 else grey[..., :3].mean(-1)) < 128  # target.png: black shape on white
     labels, n = ndimage.label(~shape)
     if n == 0:
         return 0.0
