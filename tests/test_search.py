@@ -104,6 +104,23 @@ def test_separate_opens_a_fist_curled_into_its_palm():
     assert score(problem.shadows(apart)[0].numpy() > 0.5, target).iou > 0.95
 
 
+def test_a_stage_that_layers_its_hypotheses_refits_the_shadow_with_the_hands_apart():
+    target, truth = known_target("bird", SIZE)  # the library's bird: palms 18 mm into each other
+    problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
+    inside = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
+    refit = Stage(
+        height=SIZE, blur_px=0, attract_px=2, steps=60, keep=1, lr_scale=0.15, skeleton=0.0, contacts_every=10
+    )
+    found = {}
+    for layer in (False, True):
+        first = Stage(height=SIZE, blur_px=1, attract_px=4, steps=1, keep=1, layer=layer)
+        result = stages_module.run_stages(problem, inside, [first, refit])
+        found[layer] = problem.mesh_penetration(result.poses)[0].between_mm, _key(problem, result.poses)
+    assert found[False][0] > 10  # the stages alone leave the palms inside each other
+    assert found[True][0] <= 3.0
+    assert found[True][1][0] is False  # ... and with the layering the shadow still passes
+
+
 def test_a_fit_whose_search_ends_in_penetration_comes_out_apart(monkeypatch):
     from handshadow import fit as fit_module
 

@@ -52,6 +52,9 @@ QUALITY = ("fast", "default", "best")
 POLISH_ROUNDS = {"fast": (1, 0), "default": (2, 4), "best": (3, 6)}
 # --hands auto prefers one hand unless two score better by more than this (rank-key blend).
 ONE_HAND_PREFERENCE = 0.02
+# The stages at full resolution push out what the exact mesh test finds inside other flesh,
+# found afresh every this many steps (search.objective.ExactContacts; 0 turns it off).
+CONTACTS_EVERY = 10
 CUDA_WIDER = 16  # on a GPU the search keeps this many times the hypotheses (see schedule)
 MAX_VIEWS = 2  # targets one pose may answer: today's lamp and wall, and one turned about the hands
 # With several views each shadow's outline is pulled by the other views too and settles more
@@ -189,9 +192,11 @@ def schedule(
     quality: str, iters: int | None, size: int, device: str = "cpu", views: int = 1
 ) -> tuple[int, int, list[Stage]]:
     """(random starts, kept starts, stages) for a quality, scaled to a total step budget. On a
-    GPU a batch of a thousand hypotheses costs about what one does, so it keeps CUDA_WIDER
-    times the starts and CUDA_WIDER / 4 times the survivors of every stage but the last. With
-    several views a last exact stage (VIEWS_SETTLE) settles the pose in all of them."""
+        GPU a batch of a thousand hypotheses costs about what one does, so it keeps CUDA_WIDER
+        times the starts and CUDA_WIDER / 4 times the survivors of every stage but the last. With
+        several views a last exact stage (VIEWS_SETTLE) settles the pose in all of them. The stages
+    at full resolution push out the exact mesh contacts (CONTACTS_EVERY); after every stage but
+    the last, hands inside each other pass one in front of the other (Stage.layer)."""
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
     s = Stage
@@ -232,6 +237,8 @@ def schedule(
         stages = [dataclasses.replace(st, keep=st.keep * CUDA_WIDER // 4) for st in stages[:-1]] + stages[-1:]
     if views > 1:
         stages = [*stages, dataclasses.replace(VIEWS_SETTLE, height=size, steps=VIEWS_SETTLE_STEPS[quality])]
+    stages = [dataclasses.replace(st, contacts_every=CONTACTS_EVERY) if st.height == size else st for st in stages]
+    stages = [dataclasses.replace(st, layer=True) for st in stages[:-1]] + stages[-1:]
     if iters is not None:
         total = sum(st.steps for st in stages)
         stages = [dataclasses.replace(st, steps=max(1, round(st.steps * iters / total))) for st in stages]

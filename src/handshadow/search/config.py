@@ -8,6 +8,10 @@ import dataclasses
 from handshadow.hands.arms import ELBOW_SPAN_M
 from handshadow.hands.penetration import TOLERANCE_MM
 
+# A push between the two hands keeps this share of its gradient across the light's rays: a
+# hand moved along its rays keeps its shadow (hands.proxies.SIDEWAYS does the same for spheres).
+CONTACT_SIDEWAYS = 0.25
+
 
 @dataclasses.dataclass(frozen=True)
 class Stage:
@@ -17,7 +21,12 @@ class Stage:
     in full-resolution pixels (0: the exact shadow); attract_px: reach of the pull toward
     missing parts, full-resolution pixels (0: off); steps: Adam steps; keep: hypotheses that
     survive the stage; lr_scale: factor on the learning rates; skeleton: weight factor of the
-    skeleton terms (long-range guides: joints inside the target, fingers to thin parts)."""
+    skeleton terms (long-range guides: joints inside the target, fingers to thin parts);
+    contacts_every: how often the exact mesh test (hands.penetration) finds the vertices
+    inside other flesh for the objective's contacts term (0: the term is off); layer: after
+    the stage, each kept hypothesis whose hands pass through each other has one put in front
+    of the other along the light's rays, so the stages after it fit the shadow with the hands
+    apart instead of the separation pushing them apart at the end (one view only)."""
 
     height: int
     blur_px: float
@@ -26,6 +35,8 @@ class Stage:
     keep: int
     lr_scale: float = 1.0
     skeleton: float = 1.0
+    contacts_every: int = 0  # find the exact mesh contacts afresh every this many steps (0: off)
+    layer: bool = False  # after the stage, hands inside each other pass one in front (finishing.pass_in_front)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,6 +52,7 @@ class Weights:
     excess: float = 2.0
     attraction: float = 0.3
     penetration: float = 0.02
+    contacts: float = 0.002  # vertices inside other flesh by the exact mesh test (stages with contacts_every)
     placement: float = 0.05
     reach: float = 0.05  # wrists and elbows within one person's reach (Reach)
     arms: float = 0.5  # forearms lead back: elbow no nearer the wall than its wrist (per Reach.margin_m, squared)

@@ -20,15 +20,12 @@ from handshadow.hands.penetration import contact_penalty, hand_parts
 from handshadow.metrics import ViewScores
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
 from handshadow.scene import RESULT_MARGIN_M
-from handshadow.search.config import Finishing
+from handshadow.search.config import CONTACT_SIDEWAYS, Finishing
 from handshadow.search.loop import optimise
 from handshadow.search.objective import view_objective
 from handshadow.search.problem import Problem
 
 log = logging.getLogger(__name__)
-# The push between the two hands keeps this share of its gradient across the light's rays: a
-# hand moved along its rays keeps its shadow (hands.proxies.SIDEWAYS does the same for spheres).
-CONTACT_SIDEWAYS = 0.25
 
 
 class Interrupted(Exception):

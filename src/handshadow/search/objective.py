@@ -22,11 +22,12 @@ import torch
 from handshadow import losses
 from handshadow.hands.arms import BACK_SLACK_M
 from handshadow.hands.kinematics import rotmat_to_rotvec
+from handshadow.hands.penetration import Contacts, contact_penalty
 from handshadow.hands.rig import KEYPOINT_NAMES
 from handshadow.poses import HandPoseBatch
 from handshadow.render import Shadow, gaussian_blur
 from handshadow.scene import Scene
-from handshadow.search.config import Stage, Weights
+from handshadow.search.config import CONTACT_SIDEWAYS, Stage, Weights
 from handshadow.search.problem import Level, Problem
 
 # Finger segments between keypoints (rig.KEYPOINT_NAMES: wrist, then per finger 3 joints + tip).
@@ -50,6 +51,7 @@ class LossTerms:
     thin_pull: torch.Tensor  # thin parts far from every finger
     anchor: torch.Tensor  # placement away from the anchor poses
     penetration: torch.Tensor  # collision proxies overlapping
+    contacts: torch.Tensor  # vertices inside other flesh, by the exact mesh test (ExactContacts)
     placement: torch.Tensor  # vertices off the working range between wall and lamp
     reach: torch.Tensor  # wrists or elbows farther apart than the performers reach
     arms: torch.Tensor  # forearms that do not lead back toward the performer (and elbows in the picture)
@@ -66,6 +68,29 @@ class LossTerms:
         return {f.name: float(getattr(self, f.name)[i].detach()) for f in dataclasses.fields(self)}
 
 
+class ExactContacts:
+    """The exact mesh contacts (hands.penetration) of a stage's B hypotheses for the
+    objective's ``contacts`` term: found afresh every ``every`` evaluations from the posed
+    hands and held in between (the term pushes those vertices out along the other surface's
+    normal as they move). The test costs about 0.1 s per hypothesis on a CPU core, so it runs
+    every few steps rather than every step. every = 0: never (the term is zero)."""
+
+    def __init__(self, problem: Problem, every: int):
+        self.problem, self.every, self.calls = problem, every, 0
+        self.found: Contacts | None = None
+
+    def __call__(self, outs) -> Contacts | None:
+        """The contacts to push out at this evaluation, from the posed hands (HandOutput per
+        slot, batch B); None when off."""
+        if not self.every:
+            return None
+        if self.calls % self.every == 0:
+            found = self.problem.posed_penetration([o.vertices for o in outs])
+            self.found = Contacts.cat([p.contacts for p in found])
+        self.calls += 1
+        return self.found
+
+
 def objective(
     problem: Problem, hands: list[HandPoseBatch], stage: Stage, weights: Weights | None = None
 ) -> tuple[LossTerms, Shadow]:
@@ -77,14 +102,19 @@ def objective(
 
 
 def view_objective(
-    problem: Problem, hands: list[HandPoseBatch], stage: Stage, weights: Weights | None = None
+    problem: Problem,
+    hands: list[HandPoseBatch],
+    stage: Stage,
+    weights: Weights | None = None,
+    contacts: ExactContacts | None = None,
 ) -> tuple[LossTerms, list[Shadow]]:
     """The loss terms of B hypotheses at a stage over all the problem's views, and their exact
     shadow per view at the stage's resolution. The image terms (image, excess, gaps,
     attraction, inside, thin_pull) are each view's weighted by its weight; placement and the
-    arms' rules hold in every view (summed); penetration, reach and the anchor are counted
-    once. With one view this is the single-view objective exactly (its terms are built in
-    the same order, so even the gradients' rounding is the same)."""
+    arms' rules hold in every view (summed); penetration, contacts, reach and the anchor are
+    counted once. contacts: the stage's exact mesh contacts (None: that term is zero). With
+    one view this is the single-view objective exactly (its terms are built in the same
+    order, so even the gradients' rounding is the same)."""
     w = weights or problem.weights
     outs = problem.pose(hands)
     levels = [problem.level(stage.height, k) for k in range(len(problem.views))]
@@ -101,6 +131,11 @@ def view_objective(
     for (terms, shadow), level in zip(views, levels):
         terms["excess"] = w.excess * losses.excess(shadow.mask, level.maps.outside_dist)
     penetration = w.penetration * losses.penetration(problem.proxy_depths(hands, outs))
+    found = contacts(outs) if contacts is not None and w.contacts else None
+    contact = zero
+    if found is not None and len(found.item):
+        vertices = [o.vertices for o in outs]
+        contact = w.contacts * contact_penalty(vertices, found, light=problem.light_position, sideways=CONTACT_SIDEWAYS)
     placement = _summed(
         [w.placement * losses.placement(s.heights, *v.placement_range) for s, v in zip(shadows, problem.views)]
     )
@@ -111,7 +146,13 @@ def view_objective(
         for name in IMAGE_TERMS
     }
     terms = LossTerms(
-        **image_terms, anchor=anchor, penetration=penetration, placement=placement, reach=reach, arms=arms
+        **image_terms,
+        anchor=anchor,
+        penetration=penetration,
+        contacts=contact,
+        placement=placement,
+        reach=reach,
+        arms=arms,
     )
     return terms, shadows
 

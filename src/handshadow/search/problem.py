@@ -210,12 +210,16 @@ class Problem:
         """The exact test on the meshes (hands.penetration), per hypothesis: between the hands
         and (unless not ``within``) within each, every inside vertex listed as a contact (item
         = its hypothesis)."""
-        outs = self.pose(poses.hands)
+        return self.posed_penetration([o.vertices for o in self.pose(poses.hands)], within)
+
+    @torch.no_grad()
+    def posed_penetration(self, vertices: list[torch.Tensor], within: bool = True) -> list[Penetration]:
+        """:meth:`mesh_penetration` of hands already posed: per hand slot its vertices (B, V, 3)."""
         faces = [m.faces.cpu().numpy() for m in self.models]
         parts = [hand_parts(m) for m in self.models] if within else None
         found = []
-        for k in range(poses.batch):
-            positions = [o.vertices[k].detach().cpu().double().numpy() for o in outs]
+        for k in range(vertices[0].shape[0]):
+            positions = [v[k].detach().cpu().double().numpy() for v in vertices]
             pen = penetration(positions, faces, parts)
             found.append(dataclasses.replace(pen, contacts=pen.contacts.for_item(k)))
         return found

@@ -12,10 +12,11 @@ import numpy as np
 import torch
 
 from handshadow.metrics import iou
-from handshadow.poses import PoseBatch, PoseParameters
+from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
 from handshadow.search.config import Stage
+from handshadow.search.finishing import pass_in_front
 from handshadow.search.loop import optimise
-from handshadow.search.objective import view_objective
+from handshadow.search.objective import ExactContacts, view_objective
 from handshadow.search.problem import Problem
 
 log = logging.getLogger(__name__)
@@ -76,8 +77,10 @@ def run_stages(
             log.info("stage %d of %d: %d hypotheses at %d px", si + 1, len(stages), poses.batch, stage.height)
             params = PoseParameters(poses, problem.limits)
 
-            def evaluate(stage=stage, params=params):
-                terms, shadows = view_objective(problem, params.hands(), stage)
+            contacts = ExactContacts(problem, stage.contacts_every)
+
+            def evaluate(stage=stage, params=params, contacts=contacts):
+                terms, shadows = view_objective(problem, params.hands(), stage, contacts=contacts)
                 return terms.total, (terms, shadows)
 
             def after(step, seen, si=si, stage=stage, params=params):
@@ -103,12 +106,26 @@ def run_stages(
                 poses = params.poses()
             keep = min(stage.keep, poses.batch)
             poses = poses.select(rank_at(problem, poses, stage.height)[:keep])
+            if stage.layer:
+                poses = layered(problem, poses)
     except KeyboardInterrupt:
         interrupted = True
     except TimeoutError:
         log.info("search stopped at its time limit")
     ranking = rank_details(problem, poses)
     return SearchResult(poses.item(ranking[0]["index"]), done, time.perf_counter() - t0, interrupted, ranking)
+
+
+def layered(problem: Problem, poses: PoseBatch) -> PoseBatch:
+    """Each hypothesis whose two hands pass through each other (the exact test between them)
+    with one hand put in front of the other along the light's rays (finishing.pass_in_front;
+    the shadow changes by a few per cent of scale). One hand, or several views (no ray keeps
+    every shadow), come back as they are."""
+    if poses.n_hands < 2 or len(problem.views) > 1:
+        return poses
+    items = [pass_in_front(problem, poses.item(i)) for i in range(poses.batch)]
+    hands = [HandPoseBatch(*(torch.cat(t) for t in zip(*(p.hands[h].args() for p in items)))) for h in range(2)]
+    return PoseBatch(hands, poses.origins)
 
 
 def _progress(problem, params, stage, si, step, done, total, terms, shadows) -> Progress:
