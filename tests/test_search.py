@@ -68,6 +68,22 @@ def test_parameters_keep_a_pose_at_its_limits_through_ten_rebuilds():
     assert torch.allclose(PoseParameters(mid, [limits]).poses().hands[0].pose_rad, mid.hands[0].pose_rad, atol=1e-6)
 
 
+def test_a_joint_pushed_against_its_limit_can_come_back():
+    limits = JointLimits.preset("anatomical", "right")
+    lo, hi = limits.joints[..., 0], limits.joints[..., 1]
+    start = PoseBatch([HandPoseBatch(lo[None].clone(), torch.eye(3)[None], torch.zeros(1, 3), torch.zeros(1, 2))])
+    params = PoseParameters(start, [limits])
+    joints = params.hand_parameters(0)[0]
+    opt = torch.optim.Adam([joints], lr=0.1)
+    for sign, steps in ((1.0, 5), (-1.0, 20)):  # pushed below the limit for a while, then pulled back up
+        for _ in range(steps):
+            opt.zero_grad()
+            (sign * params.hand(0).pose_rad.sum()).backward()
+            opt.step()
+    moving = hi > lo
+    assert bool((params.hand(0).pose_rad[0][moving] > lo[moving] + 1e-3).all())
+
+
 def test_parameters_stay_within_the_limits_whatever_the_step():
     limits = JointLimits.preset("anatomical", "right")
     start = PoseBatch(

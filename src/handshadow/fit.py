@@ -21,7 +21,7 @@ import torch
 
 from handshadow.errors import HandshadowError
 from handshadow.hands import load_hand
-from handshadow.hands.arms import ArmCheck, check_arms
+from handshadow.hands.arms import ArmCheck
 from handshadow.hands.limits import JointLimits
 from handshadow.hands.penetration import Penetration, hand_parts, penetration
 from handshadow.hands.posed import PosedMesh, cast_shadows
@@ -171,8 +171,8 @@ class HandCountFit:
 
     def preference_key(self) -> tuple:
         """Rank key with the one-hand preference: smaller is better."""
-        failed, blend = self.search.key
-        return failed, blend - (ONE_HAND_PREFERENCE if self.n_hands == 1 else 0.0)
+        unholdable, failed, blend = self.search.key
+        return unholdable, failed, blend - (ONE_HAND_PREFERENCE if self.n_hands == 1 else 0.0)
 
 
 def resolve_device(name: str) -> str:
@@ -409,29 +409,9 @@ def view_fit(scene: Scene, target: np.ndarray, shadow: np.ndarray, weight: float
     )
 
 
-@torch.no_grad()
 def arm_check(problem: Problem, poses: PoseBatch) -> ArmCheck:
-    """The arm rules (hands.arms) for a batch-1 pose, in every view: a forearm leads back
-    when it does so from every view's wall, an elbow is out of the picture when it is out of
-    every view's."""
-    outs = [(h, o) for h, o in zip(poses.hands, problem.pose(poses.hands)) if o.forearm_points.shape[1]]
-    if not outs:  # no forearms: nothing beyond the wrist to check
-        return ArmCheck((), (), 0.0, 1)
-    elbows = torch.stack([o.forearm_points[0, -1] for _, o in outs])
-    wrists = torch.stack([h.translation[0] for h, _ in outs])
-    as_np = lambda t: t.cpu().double().numpy()  # noqa: E731
-    checks = []
-    for view in problem.views:
-        xy, elbow_heights = view.scene.project(elbows)
-        _, wrist_heights = view.scene.project(wrists)
-        image = view.scene.image
-        checks.append(
-            check_arms(as_np(xy), as_np(elbows), as_np(elbow_heights), as_np(wrist_heights), image.height, image.width)
-        )
-    if len(checks) == 1:
-        return checks[0]
-    every = lambda field: tuple(all(c) for c in zip(*(getattr(k, field) for k in checks)))  # noqa: E731
-    return dataclasses.replace(checks[0], leads_back=every("leads_back"), elbows_out=every("elbows_out"))
+    """The arm rules (hands.arms) for a batch-1 pose in every view (Problem.arm_checks)."""
+    return problem.arm_checks(poses)[0]
 
 
 def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1, views: list[ViewFit] = ()) -> dict:

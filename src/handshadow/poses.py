@@ -237,11 +237,14 @@ class PoseParameters:
     their limits by construction, a rotation vector applied in world axes on top of the
     starting rotation, and the translation in metres.
 
-    An angle v with limits [lo, hi] reads v = g(sigmoid(z)), g piecewise linear with
-    g(0) = lo, g(s0) = v0 (the start, kept exactly) and g(1) = hi; z starts at s0's logit,
-    s0 = the start's share of its range kept within [2 %, 98 %] (START_SLOPE_SHARE). For a
-    start inside that band g is the usual lo + (hi - lo) s. So building parameters from a
-    pose and reading them back returns the pose unchanged, at its limits too.
+    An angle v with limits [lo, hi] reads v = g(sigmoid(z)). For a start inside the band of
+    [2 %, 98 %] of its range (START_SLOPE_SHARE) g is the usual lo + (hi - lo) s, z starting at
+    the start's logit. A start nearer a limit (at it, say) starts z at the band edge's logit
+    s0 and reads v = v0 + (hi - lo) (s - s0), held within [lo, hi]: the start v0 comes back
+    exactly, and the joint has the full slope both ways. The hold passes its gradient through,
+    so a joint pushed against its limit can always come back (a flat piece would leave it
+    there for good: Adam never moves a parameter whose gradient is exactly zero). So building
+    parameters from a pose and reading them back returns the pose unchanged, at its limits too.
 
     Args:
         start: the PoseBatch to start from.
@@ -262,7 +265,7 @@ class PoseParameters:
                 share = (v0 - lo) / (hi - lo).clamp(min=1e-9)
                 s0 = share.clamp(START_SLOPE_SHARE, 1 - START_SLOPE_SHARE)
                 z = torch.nn.Parameter(torch.log(s0 / (1 - s0)))
-                groups.append((z, lo, hi, v0, s0, share == s0))
+                groups.append((z, lo, hi, v0, torch.sigmoid(z.detach()), share == s0))
             self._angles.append(groups)
             self._rot0.append(hand.rotation.detach().clone())
             self.rotvecs.append(torch.nn.Parameter(torch.zeros_like(hand.translation.detach())))
@@ -274,14 +277,14 @@ class PoseParameters:
 
     @staticmethod
     def _angle(z, lo, hi, v0, s0, inside_band):
+        """The angles of logits z; s0 = sigmoid of z's start (so that the start reads v0 exactly)."""
         import torch
 
         s = torch.sigmoid(z)
-        below = lo + (v0 - lo) * s / s0
-        above = v0 + (hi - v0) * (s - s0) / (1 - s0)
-        # Inside the band g is lo + (hi - lo) s, computed as such; the clamp only catches rounding.
-        value = torch.where(inside_band, lo + (hi - lo) * s, torch.where(s < s0, below, above))
-        return torch.minimum(torch.maximum(value, lo), hi)
+        # Inside the band g is lo + (hi - lo) s, computed as such; the hold only catches rounding.
+        raw = torch.where(inside_band, lo + (hi - lo) * s, v0 + (hi - lo) * (s - s0))
+        held = torch.minimum(torch.maximum(raw, lo), hi)
+        return held.detach() + (raw - raw.detach())  # exactly the held value; the gradient is raw's
 
     def hand(self, i: int) -> HandPoseBatch:
         """Hand slot i's current poses (differentiable)."""

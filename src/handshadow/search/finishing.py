@@ -203,12 +203,15 @@ def polish_round(
     generator: torch.Generator,
     stop: Callable[[], bool] | None = None,
 ) -> tuple[ViewScores, PoseBatch]:
-    """One round of the polish: (the best score met, its poses), the start's if none beat it."""
+    """One round of the polish: (the best score met, its poses), the start's if none beat it.
+    A pose wins only if it goes no deeper into other flesh than ``allowed_mm`` and, when the
+    start's arms could be held, its arms can be held too."""
     stage = settings.stage(problem.height, settings.steps)
     weights = settings.polish_weights(problem.weights)
     params = PoseParameters(poses.repeat(settings.copies), problem.limits)
     jitter(params, settings.jitter, generator)
     best = {"score": best_score, "key": best_score.key(), "poses": poses}
+    keep_holdable = problem.holdable(poses)[0]  # a pose whose arms can be held never gives that up
 
     def evaluate():
         terms, shadows = view_objective(problem, params.hands(), stage, weights)
@@ -221,7 +224,9 @@ def polish_round(
         for i, s in enumerate(problem.judge([sh.mask.detach().cpu().numpy() > 0.5 for sh in shadows])):
             key = s.key()
             # The exact mesh test only for a pose that would win: it is the costly part.
-            if key < best["key"] and problem.mesh_penetration(current.item(i))[0].deepest_mm <= allowed_mm:
+            if key >= best["key"] or (keep_holdable and not problem.holdable(current.item(i))[0]):
+                continue
+            if problem.mesh_penetration(current.item(i))[0].deepest_mm <= allowed_mm:
                 best.update(score=s, key=key, poses=current.item(i))
         return False
 

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 from skimage.transform import resize
 
+from handshadow.hands.arms import ArmCheck, check_arms
 from handshadow.hands.limits import JointLimits
 from handshadow.hands.model import HandModel, HandOutput
 from handshadow.hands.penetration import Penetration, hand_parts, penetration
@@ -223,6 +224,43 @@ class Problem:
             pen = penetration(positions, faces, parts)
             found.append(dataclasses.replace(pen, contacts=pen.contacts.for_item(k)))
         return found
+
+    @torch.no_grad()
+    def arm_checks(self, poses: PoseBatch) -> list[ArmCheck]:
+        """Per hypothesis, the arm rules (hands.arms) in every view: a forearm leads back when
+        it does so from every view's wall, an elbow is out of the picture when it is out of
+        every view's."""
+        outs = [(h, o) for h, o in zip(poses.hands, self.pose(poses.hands)) if o.forearm_points.shape[1]]
+        if not outs:  # no forearms: nothing beyond the wrist to check
+            return [ArmCheck((), (), 0.0, 1)] * poses.batch
+        elbows = torch.stack([o.forearm_points[:, -1] for _, o in outs], 1)  # (B, n, 3)
+        wrists = torch.stack([h.translation for h, _ in outs], 1)
+        as_np = lambda t: t.cpu().double().numpy()  # noqa: E731
+        found = []
+        for k in range(poses.batch):
+            checks = []
+            for view in self.views:
+                xy, elbow_heights = view.scene.project(elbows[k])
+                _, wrist_heights = view.scene.project(wrists[k])
+                image = view.scene.image
+                checks.append(
+                    check_arms(
+                        as_np(xy),
+                        as_np(elbows[k]),
+                        as_np(elbow_heights),
+                        as_np(wrist_heights),
+                        image.height,
+                        image.width,
+                    )
+                )
+            back = tuple(all(c) for c in zip(*(x.leads_back for x in checks)))
+            out = tuple(all(c) for c in zip(*(x.elbows_out for x in checks)))
+            found.append(dataclasses.replace(checks[0], leads_back=back, elbows_out=out))
+        return found
+
+    def holdable(self, poses: PoseBatch) -> list[bool]:
+        """Per hypothesis, whether the performers can hold its arms (ArmCheck.holdable)."""
+        return [a.holdable(self.reach.performers) for a in self.arm_checks(poses)]
 
     @torch.no_grad()
     def penetration_mm(self, poses: PoseBatch) -> torch.Tensor:

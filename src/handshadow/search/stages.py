@@ -140,17 +140,21 @@ def _progress(problem, params, stage, si, step, done, total, terms, shadows) -> 
 
 def rank_at(problem: Problem, poses: PoseBatch, height: int) -> list[int]:
     """Hypotheses' indices, best first, by the fit measures at a frame height (every view's,
-    metrics.ViewScores)."""
+    metrics.ViewScores); at full resolution those whose arms the performers can hold first
+    (the search's arms term is soft, and a pose nobody can hold is no result)."""
     keys = [s.key() for s in problem.scores(poses, height)]
+    if height == problem.height:
+        keys = [(not held, *k) for held, k in zip(problem.holdable(poses), keys)]
     return sorted(range(poses.batch), key=keys.__getitem__)
 
 
 def rank_details(problem: Problem, poses: PoseBatch) -> list[dict]:
-    """Per hypothesis at full resolution: index, view 0's measures, rank key (every view's)
-    and, with several views, each view's measures under "views"; best first."""
+    """Per hypothesis at full resolution: index, view 0's measures, whether its arms can be
+    held, rank key (holdable first, then every view's measures) and, with several views,
+    each view's measures under "views"; best first."""
     rows = []
-    for i, s in enumerate(problem.scores(poses)):
-        row = {"index": i, **s.scores[0].as_dict(), "key": s.key()}
+    for i, (s, held) in enumerate(zip(problem.scores(poses), problem.holdable(poses))):
+        row = {"index": i, **s.scores[0].as_dict(), "holdable": held, "key": (not held, *s.key())}
         if len(s.scores) > 1:
             row["views"] = [v.as_dict() for v in s.scores]
         rows.append(row)
