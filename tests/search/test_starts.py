@@ -43,3 +43,15 @@ def test_apply_similarity_moves_the_shadow_as_aligned():
     # Rotation is exact; scale and shift come from a move in depth, so close, not exact.
     assert iou(got, predicted.numpy()) > 0.7  # the forearm beyond the frame turns in: the 2D warp cannot know it
     assert iou(got, shadow[0].numpy() > 0.5) < 0.6  # it did move
+
+
+def test_starts_whose_arms_can_be_held_come_first():
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.search.starts import choose_starts, random_starts
+
+    target, truth = known_target("bird", 64)
+    problem = make_problem(target, truth.scene, ["right", "left"], FitConfig(size=64))
+    drawn = random_starts(64, ["right", "left"], problem.limits, np.random.default_rng(0))
+    assert not all(problem.holdable(drawn))  # random hands often point a forearm at the wall
+    starts = choose_starts(problem, ["right", "left"], 16, 12, np.random.default_rng(0))
+    assert starts.batch == 12 and all(problem.holdable(starts))

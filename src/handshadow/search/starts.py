@@ -40,6 +40,9 @@ ATLAS_SECOND = 3  # ... and for each, entries nearest what it leaves uncovered, 
 HOLE_PENALTY = 0.3  # how much a start that fills the target's holes and notches loses (see start_score)
 ATLAS_SHARE = 0.5  # at most this share of the kept starts from the atlas (the rest stay diverse)
 SECOND_HAND_MIN_SHARE = 0.05  # less left uncovered than this share of the target: cover it all
+# Random hands are drawn this many times over and those whose arms can be held kept first
+# (three random hands in four have a forearm pointing toward the wall).
+RANDOM_OVERSAMPLE = 4
 ALIGN_WALL_CLEARANCE_M = 0.15  # the alignment's scaling keeps hands this far from the wall
 ALIGN_LAMP_CLEARANCE_M = 0.35  # ... and this far from a point light
 
@@ -279,8 +282,9 @@ def choose_starts(
     atlas: Atlas | None = None,
 ) -> PoseBatch:
     """The search's starts: library poses (but those named in ``exclude``), ``n_random``
-    random hands and, given an atlas, its entries nearest the target (:func:`atlas_starts`),
-    each aligned to the target in 2D, the best ``n_keep`` by IoU (at most PER_LIBRARY_POSE
+    random hands (drawn RANDOM_OVERSAMPLE times over, holdable ones first) and, given an atlas, its entries nearest the target (:func:`atlas_starts`),
+    each aligned to the target in 2D, the best ``n_keep`` by IoU, those whose arms can be
+    held (Problem.holdable) first (at most PER_LIBRARY_POSE
     from any one library pose and ATLAS_SHARE from the atlas, so the starts stay diverse). ``given`` starts (one PoseBatch,
     e.g. a morph's other end) are always kept, both as given and aligned.
     With several views each candidate is also turned about the vertical (:func:`view_turns_rad`),
@@ -289,10 +293,10 @@ def choose_starts(
 
     problem: a search.problem.Problem; returns a PoseBatch on its device, with origins."""
 
-    parts = [
-        library_starts(len(sides), sides, exclude=exclude),
-        random_starts(n_random, sides, problem.limits, rng),
-    ]
+    randoms = random_starts(RANDOM_OVERSAMPLE * n_random, sides, problem.limits, rng)
+    held = problem.holdable(randoms)
+    randoms = randoms.select(sorted(range(randoms.batch), key=lambda i: not held[i])[:n_random])
+    parts = [library_starts(len(sides), sides, exclude=exclude), randoms]
     if atlas is not None:
         parts.append(atlas_starts(atlas, problem.level(ALIGN_FRAME_PX).maps.target.cpu(), sides, problem.scene))
     turns = view_turns_rad(problem)
@@ -304,7 +308,11 @@ def choose_starts(
     # Aligned to each view in turn (view 0's first), judged in every view (weighted).
     moved = PoseBatch.cat([align_to_view(problem, cand, k) for k in range(len(problem.views))])
     overlap = views_start_score(problem, moved)
-    order = torch.argsort(overlap, descending=True).tolist()
+    # Starts whose arms can be held come first (the alignment keeps that: it turns the hands
+    # about the lamp's axis and moves them along it or parallel to the wall): the arms term
+    # would have to turn the others, undoing their alignment.
+    held = torch.as_tensor(problem.holdable(moved), device=overlap.device)
+    order = torch.argsort(overlap - 2.0 * (~held).to(overlap.dtype), descending=True).tolist()
     picked = list(range(cand.batch - given.batch, cand.batch)) if given is not None else []  # aligned
     per_pose: dict[str, int] = {}
     for i in order:
