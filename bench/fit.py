@@ -4,6 +4,7 @@ success). It runs on `handshadow batch` (Dask), so it scales out with --workers 
 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
                         [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
+                        [--fits-only]
 
 Prints one row per target as it finishes: the shadow's measures, the deepest penetration
 between or within the hands (pen, mm, exact on the meshes), whether the pose can be held
@@ -15,6 +16,9 @@ of at least HOLE_SHARE of its area (found in each written target.png) are listed
 It ends with
 SUMMARY n=<n> median_iou=<x> success=<share> shadow_success=<share> performable_success=<share>
         penetrating_share=<share over 3 mm> median_s=<x> holes_n=<n> holes_success=<share>
+With --fits-only it runs the fits alone in --workers local processes (fit.fit_frame, the same
+measures, no result folders, no contact sheet): on a small machine writing one result folder
+(progress GIF, pictures, meshes) slows the other worker's fit.
 (success and performable_success are the same number: this project's success test counts a
 result only when it is performable; s: the fit's own seconds, as `handshadow fit` reports
 them, without start-up or export.)
@@ -59,6 +63,7 @@ def main() -> None:
     parser.add_argument("--threads-per-worker", type=int, help="torch threads per worker (default: cores / workers)")
     parser.add_argument("--scheduler", help="an existing Dask cluster instead of a local one")
     parser.add_argument("--resume", action="store_true", help="keep complete result folders in --out (default: refit)")
+    parser.add_argument("--fits-only", action="store_true", help="fit and judge in local processes, write no folders")
     args = parser.parse_args()
     targets = sorted(find_targets(args.folders), key=lambda t: t.source)
     if args.names:
@@ -82,6 +87,9 @@ def main() -> None:
         flush=True,
     )
     config = FitConfig(hands=args.hands, size=args.size, quality=args.quality, device=args.device)
+    if args.fits_only:
+        fits_only(targets, config, args.workers, threads)
+        return
     report = run_batch(
         targets,
         args.out,
@@ -101,28 +109,68 @@ def main() -> None:
         iio.imwrite(
             out / "contact_sheet.png", np.concatenate([_sheet_row(out / r["name"], r["success"]) for r in rows], 0)
         )
-    m = report.medians()
     holes = [r for r in rows if largest_hole_share(out / r["name"] / "target.png") >= HOLE_SHARE]
     print(f"contact sheet: {out / 'contact_sheet.png'}; results: {out / 'index.html'}")
+    _summary(rows, holes)
+
+
+def fits_only(targets, config: FitConfig, workers: int, threads: int) -> None:
+    """Fit and judge every target in ``workers`` local processes of ``threads`` torch threads
+    each; print a row per target as it finishes and the SUMMARY."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    rows, holes = [], []
+    with ProcessPoolExecutor(workers, initializer=_set_threads, initargs=(threads,)) as pool:
+        jobs = [pool.submit(_fit_one, t.name, t.source, config) for t in targets]
+        for job in as_completed(jobs):
+            row, hole = job.result()
+            print_row(row)
+            rows.append(row)
+            if hole >= HOLE_SHARE:
+                holes.append(row)
+    _summary(rows, holes)
+
+
+def _set_threads(threads: int) -> None:
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def _fit_one(name: str, source: str, config: FitConfig) -> tuple[dict, float]:
+    from handshadow.fit import fit_frame
+    from handshadow.pipeline import resolve_target
+
+    target = resolve_target(source, config.size, config.size)
+    result = fit_frame(target, config)
+    return {"name": name, "status": "done", **result.posed.fit}, largest_hole_share(target)
+
+
+def _summary(rows: list[dict], holes: list[dict]) -> None:
     print(f"holes group (a hole of at least {HOLE_SHARE:.1%} of the frame): {len(holes)} targets")
     for r in holes:
         print(f"  {r['name']:22s} {r['iou']:6.3f} {'yes' if r['success'] else 'no'}")
     share = lambda rs, key: sum(bool(r[key]) for r in rs) / len(rs) if rs else float("nan")  # noqa: E731
+    median = lambda key: float(np.median([r[key] for r in rows])) if rows else float("nan")  # noqa: E731
     penetrating = [r for r in rows if float(r.get("penetration_mm") or 0.0) > PENETRATION_TOLERANCE_MM]
     print(
-        f"SUMMARY n={m['n']} median_iou={m['median_iou']:.3f} success={m['success']:.3f} "
+        f"SUMMARY n={len(rows)} median_iou={median('iou'):.3f} success={share(rows, 'success'):.3f} "
         f"shadow_success={share(rows, 'shadow_success'):.3f} performable_success={share(rows, 'success'):.3f} "
-        f"penetrating_share={len(penetrating) / max(len(rows), 1):.2f} median_s={m['median_s']:.1f} "
+        f"penetrating_share={len(penetrating) / max(len(rows), 1):.2f} median_s={median('seconds'):.1f} "
         f"holes_n={len(holes)} holes_success={share(holes, 'success'):.3f}"
     )
     sys.stdout.flush()
 
 
-def largest_hole_share(path: Path) -> float:
-    """The largest hole of a written target frame (a background region that does not reach
-    the frame's edge) as a share of the frame's area; 0 without holes."""
-    grey = iio.imread(path)
-    shape = (grey if grey.ndim == 2 else grey[..., :3].mean(-1)) < 128  # target.png: black shape on white
+def largest_hole_share(frame) -> float:
+    """The largest hole of a target frame (a bool array, or a written target.png) (a
+    background region that does not reach the frame's edge) as a share of the frame's area;
+    0 without holes."""
+    if isinstance(frame, np.ndarray):
+        shape = frame.astype(bool)
+    else:
+        grey = iio.imread(frame)
+        shape = (grey if grey.ndim == 2 else grey[..., :3].mean(-1)) < 128  # target.png: black shape on white
     labels, n = ndimage.label(~shape)
     if n == 0:
         return 0.0
