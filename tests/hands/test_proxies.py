@@ -73,3 +73,46 @@ def test_forearms_crossing_through_each_other_penetrate(pair):
     assert depth_mm(pair, [rest, rest], [(-0.1, 0.0, 1.0), (0.1, 0.0, 1.0)], [down_right, down_left]) > 10
     # The same X with one arm 12 cm nearer the lamp passes in front: no contact.
     assert depth_mm(pair, [rest, rest], [(-0.1, 0.0, 1.0), (0.1, 0.0, 1.12)], [down_right, down_left]) == 0.0
+
+
+def _dense_depths(model, centres, light):
+    """The depths of every pair worked out densely: the reference for the broad phase."""
+    from handshadow.hands.proxies import SIDEWAYS
+
+    diff = centres[:, :, None, :] - centres[:, None, :, :]
+    with torch.no_grad():
+        ray = 0.5 * (centres[:, :, None, :] + centres[:, None, :, :]) - light
+        ray = ray / ray.norm(dim=-1, keepdim=True)
+    along = (diff * ray).sum(-1, keepdim=True) * ray
+    side = diff - along
+    split = torch.where(model.across[None, :, :, None], along + SIDEWAYS * side + (1 - SIDEWAYS) * side.detach(), diff)
+    d = (split * split).sum(-1).clamp(min=1e-18).sqrt()
+    return torch.relu(model.reach - d).flatten(1)
+
+
+def test_the_broad_phase_gives_every_pairs_depth_and_gradient(pair):
+    hands, model = pair
+    gen = torch.Generator().manual_seed(0)
+    curled = pose(**{f: [(0, 0, 60), (0, 0, 70), (0, 0, 40)] for f in ("index", "middle", "ring", "little")})
+    rest = pose()
+    outs, globals_ = [], []
+    for k, hand in enumerate(hands):  # 6 hypotheses: hands from far apart to through each other
+        rot = torch.eye(3, dtype=torch.float64).expand(6, 3, 3)
+        trans = torch.tensor([[0.0, 0.0, 1.0]] * 6, dtype=torch.float64)
+        if k == 1:
+            trans = trans + torch.tensor([0.3, 0.1, 0.06, 0.03, 0.015, 0.0], dtype=torch.float64)[:, None]
+            trans = trans + 0.003 * torch.randn(6, 3, generator=gen, dtype=torch.float64)
+        p = (curled if k else rest).expand(6, 15, 3)
+        outs.append(hand(p, rot, trans))
+        globals_.append((rot, trans))
+    centres = model.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_).detach()
+    light = torch.tensor([0.0, 0.0, 2.0], dtype=torch.float64)
+    a = centres.clone().requires_grad_(True)
+    b = centres.clone().requires_grad_(True)
+    fast, dense = model.depths(a, light), _dense_depths(model, b, light)
+    assert float(dense[0].max().detach()) == 0.0 and float(dense[-1].max().detach()) > 0.01  # apart ... inside
+    assert torch.equal(fast, dense)
+    weights = torch.rand(fast.shape, generator=gen, dtype=torch.float64)
+    (fast * weights).sum().backward()
+    (dense * weights).sum().backward()
+    assert torch.allclose(a.grad, b.grad, atol=1e-12)

@@ -19,6 +19,9 @@ from handshadow.hands.rig import N_JOINTS, HandRig
 SHRINK = 0.85  # radius factor: contact is allowed, overlap beyond it is penetration
 RADIUS_PERCENTILE = 50  # a finger sphere's radius: this percentile of its vertices' distances from the bone
 PALM, FOREARM = 5, 6  # part ids after the fingers 0..4 (thumb..little)
+# The broad phase passes pairs this much beyond their reach to the exact distance (torch.cdist
+# may compute distances through a matrix product, off by far less than this).
+BROAD_PHASE_M = 1e-3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -172,14 +175,29 @@ class PenetrationModel(torch.nn.Module):
         if light is None or not bool(self.across.any()):
             d = torch.cdist(centres, centres)
             return torch.relu(self.reach - d).flatten(1)
-        diff = centres[:, :, None, :] - centres[:, None, :, :]  # (B, S, S, 3)
+        # Broad phase: only the pairs that touch in some hypothesis are worked out with their
+        # gradient (a few hundred of B x S x S); the rest are exactly 0 with no gradient.
+        b, i, j = self._touching(centres)
+        ci, cj = centres[b, i], centres[b, j]  # (K, 3)
+        diff = ci - cj
         with torch.no_grad():
-            ray = 0.5 * (centres[:, :, None, :] + centres[:, None, :, :]) - light
+            ray = 0.5 * (ci + cj) - light
             ray = ray / ray.norm(dim=-1, keepdim=True).clamp(min=1e-9)
         along = (diff * ray).sum(-1, keepdim=True) * ray
         side = diff - along
         across_only = torch.where(
-            self.across[None, :, :, None], along + SIDEWAYS * side + (1 - SIDEWAYS) * side.detach(), diff
+            self.across[i, j][:, None], along + SIDEWAYS * side + (1 - SIDEWAYS) * side.detach(), diff
         )
         d = (across_only * across_only).sum(-1).clamp(min=1e-18).sqrt()
-        return torch.relu(self.reach - d).flatten(1)
+        n = centres.shape[1]
+        out = centres.new_zeros(centres.shape[0], n * n)
+        return out.index_put((b, i * n + j), torch.relu(self.reach[i, j] - d))
+
+    @torch.no_grad()
+    def _touching(self, centres: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(hypothesis, sphere, sphere) indices (K,) each of the tested pairs within reach, or
+        within BROAD_PHASE_M of it (the exact distance then decides). The light's split of a
+        difference into along and sideways parts keeps its length, so the plain distance is
+        the one to test."""
+        near = torch.cdist(centres, centres) < self.reach + BROAD_PHASE_M
+        return near.nonzero(as_tuple=True)
