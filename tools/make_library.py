@@ -9,10 +9,12 @@ identity rotation holds a hand up, fingers to the ceiling, palm to the wall. Fin
 Wrist: (flexion toward the palm, deviation toward the thumb) degrees.
 
 Run:  .venv/bin/python tools/make_library.py
+      .venv/bin/python tools/make_library.py --fix-arms   (only lead back forearms that do not)
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -433,7 +435,7 @@ def holdable(data: dict) -> tuple[dict, str]:
     problem = make_problem(target, posed.scene, sides, FitConfig(size=posed.scene.image.height))
     poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in posed.hands])
     before = problem.mesh_penetration(poses)[0].deepest_mm
-    poses = polish(problem, separate(problem, poses), rounds=3, always=True)
+    poses = polish(problem, separate(problem, lead_back(problem, poses)), rounds=3, always=True)
     after = problem.mesh_penetration(poses)[0].deepest_mm
     hands = [h.to_json() for b, side in zip(poses.hands, sides) for h in b.to_hand_poses(side, "anny")]
     shadow = problem.shadows(poses)[0].numpy() > 0.5
@@ -441,13 +443,116 @@ def holdable(data: dict) -> tuple[dict, str]:
     return {**data, "hands": hands}, f"penetration {before:.1f} -> {after:.1f} mm, shadow IoU {iou:.3f}"
 
 
+# The wrist angles lead_back tries, degrees apart, within the wrist's limits.
+WRIST_STEP_DEG = 5.0
+# The whole-hand tilts lead_back tries beyond the least that levels the forearm, degrees.
+TILT_STEPS_DEG = np.arange(0.0, 12.5, 2.5)
+
+
+def lead_back(problem, poses):
+    """Poses (a PoseBatch of one) whose forearms lead back toward the performer
+    (hands.arms): each hand whose elbow is nearer the wall than its wrist gets, of the wrist
+    angles on a WRIST_STEP_DEG grid within its limits (they turn only the forearm) and the
+    whole hand tilted about its wrist across the wall (TILT_STEPS_DEG), the one that leads it
+    back and changes the shadow least (IoU with the pose's own shadow)."""
+    import torch
+
+    with torch.no_grad():
+        return _lead_back(problem, poses)
+
+
+def _lead_back(problem, poses):
+    import torch
+
+    from handshadow.hands.arms import BACK_SLACK_M
+    from handshadow.poses import PoseBatch
+
+    shadow = problem.shadows(poses)[0] > 0.5
+    hands = list(poses.hands)
+    for k in range(len(problem.models)):
+        out = problem.pose(hands)[k]
+        if not out.forearm_points.shape[1]:
+            continue
+        elbow_height = float(out.forearm_points[0, -1, 2])
+        if elbow_height >= float(hands[k].translation[0, 2]) - BACK_SLACK_M:
+            continue
+        lo, hi = problem.limits[k].wrist.cpu().numpy()[:, 0], problem.limits[k].wrist.cpu().numpy()[:, 1]
+        grid = np.radians(WRIST_STEP_DEG)
+        flex = np.arange(lo[0], hi[0] + 1e-9, grid)
+        dev = np.arange(lo[1], hi[1] + 1e-9, grid)
+        wrists = torch.as_tensor(
+            np.stack(np.meshgrid(flex, dev, indexing="ij"), -1).reshape(-1, 2), dtype=torch.float32
+        )
+        # ... and the whole hand tilted about its wrist, across the wall, until the forearm
+        # lies level with the wrist or behind it (TILT_STEPS_DEG beyond the least tilt).
+        wrist = hands[k].translation[0].double().numpy()
+        along = out.forearm_points[0, -1].double().numpy() - wrist
+        along /= np.linalg.norm(along)
+        axis = np.cross(along, [0.0, 0.0, 1.0])
+        axis /= np.linalg.norm(axis)
+        least = np.arcsin(np.clip(-along[2], -1.0, 1.0))
+        turns = Rotation.from_rotvec(np.outer(least + np.radians(TILT_STEPS_DEG), axis)).as_matrix()
+        rotations = torch.as_tensor(turns, dtype=torch.float32) @ hands[k].rotation[0]
+        n_wrist, n = len(wrists), len(wrists) + len(turns)
+        tried = [h.select([0] * n) for h in hands]
+        tried[k] = dataclasses.replace(
+            tried[k],
+            wrist_rad=torch.cat([wrists, tried[k].wrist_rad[n_wrist:]]),
+            rotation=torch.cat([tried[k].rotation[:n_wrist], rotations]),
+        )
+        batch = PoseBatch(tried)
+        elbows = problem.pose(tried)[k].forearm_points[:, -1, 2]
+        back = elbows >= tried[k].translation[:, 2]  # level with the wrist or behind it
+        masks = problem.shadows(batch) > 0.5
+        overlap = (masks & shadow).flatten(1).sum(1) / (masks | shadow).flatten(1).sum(1)
+        overlap = torch.where(back, overlap, torch.full_like(overlap, -1.0))
+        best = int(overlap.argmax())
+        if overlap[best] < 0:
+            raise ValueError(f"no wrist angle within its limits leads hand {k}'s forearm back")
+        hands[k] = tried[k].select([best])
+    return PoseBatch(hands)
+
+
+def fix_arms() -> None:
+    """Lead back the forearms of the library's poses that do not (lead_back), keeping every
+    other value of their files; the poses whose arms are already holdable stay byte for byte."""
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.hands.posed import cast_shadow
+    from handshadow.posefile import parse_pose
+    from handshadow.poses import HandPoseBatch, PoseBatch
+
+    for path in sorted(LIBRARY.glob("*.json")):
+        data = json.loads(path.read_text())
+        posed = parse_pose(data)
+        target = cast_shadow(posed)[1] > 0.5
+        sides = [h.side for h in posed.hands]
+        config = FitConfig(size=posed.scene.image.height, hands=str(len(sides)), device="cpu")
+        problem = make_problem(target, posed.scene, sides, config)
+        poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in posed.hands])
+        if problem.holdable(poses)[0]:
+            continue
+        fixed = lead_back(problem, poses)
+        shadow = problem.shadows(fixed)[0].numpy() > 0.5
+        iou = float((shadow & target).sum() / (shadow | target).sum())
+        for h, batch in zip(data["hands"], fixed.hands):
+            new = batch.to_hand_poses(h["side"], h["model"])[0].to_json()
+            h.update(wrist_deg=new["wrist_deg"], rotation=new["rotation"])  # all lead_back changes
+        path.write_text(json.dumps(data, indent=1) + "\n")
+        print(f"{path.stem:10s} forearms led back: holdable {problem.holdable(fixed)[0]}, shadow IoU {iou:.3f}")
+
+
 if __name__ == "__main__":
+    import sys
+
     import imageio.v3 as iio
     import torch
 
     from handshadow.hands.posed import cast_shadow
     from handshadow.posefile import parse_pose
 
+    if sys.argv[1:] == ["--fix-arms"]:
+        fix_arms()
+        raise SystemExit
     LIBRARY.mkdir(parents=True, exist_ok=True)
     scene = Scene.default(192, 192)
     tiles = []

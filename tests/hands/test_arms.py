@@ -30,3 +30,20 @@ def test_inside_frame_pushes_a_point_out_by_the_nearest_edge():
     assert float(pts.grad[0, 0, 0]) > 0 and float(pts.grad[0, 1].abs().sum()) == 0  # out through x = 0
     # A margin keeps a point that is just outside still pushed.
     assert float(losses.inside_frame(pts, 100, 100, margin_px=8)[0].detach()) > (10 / 100) ** 2
+
+
+def test_every_library_pose_has_arms_one_person_can_hold():
+    # The library's poses start the search; one whose forearm points at the wall is ranked
+    # behind every start a person can hold (search.starts), so it would never be tried.
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.library import library_names, load_library_pose
+    from handshadow.poses import HandPoseBatch, PoseBatch
+
+    for name in library_names():
+        posed = load_library_pose(name)
+        sides = [h.side for h in posed.hands]
+        blank = np.zeros((64, 64), bool)
+        problem = make_problem(blank, posed.scene, sides, FitConfig(hands=str(len(sides)), device="cpu"))
+        poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in posed.hands])
+        check = problem.arm_checks(poses)[0]
+        assert check.holdable(), f"{name}: forearms lead back {check.leads_back}, {check.performers} performers"
