@@ -292,6 +292,27 @@ def test_polish_rounds_go_on_only_for_an_improving_near_miss(monkeypatch):
     assert len(played) == 2
 
 
+def test_a_near_miss_polish_waits_patience_rounds_for_the_next_improvement(monkeypatch):
+    problem, truth = _problem_and_truth()
+    off = _moved(truth)
+    # Two rounds that bring nothing, then one that passes: patience 3 waits for it, 1 does not.
+    hd95s = [0.038, 0.036, 0.036, 0.036, 0.029, 0.028, 0.027]
+    played = _scripted_rounds(monkeypatch, hd95s)
+    polish(problem, off, rounds=2, near_rounds=6, patience=3)
+    assert played == hd95s[:5]
+    played = _scripted_rounds(monkeypatch, hd95s)
+    polish(problem, off, rounds=2, near_rounds=6, patience=1)
+    assert played == hd95s[:3]
+    # Patience runs out: three rounds in a row bring nothing after the last improvement.
+    played = _scripted_rounds(monkeypatch, [0.038, 0.036, 0.036, 0.036, 0.036, 0.035, 0.035, 0.035])
+    polish(problem, off, rounds=2, near_rounds=8, patience=3)
+    assert len(played) == 5
+    # ... and the near rounds never exceed near_rounds.
+    played = _scripted_rounds(monkeypatch, [0.039 - 0.001 * k for k in range(12)])
+    polish(problem, off, rounds=2, near_rounds=3, patience=3)
+    assert len(played) == 5
+
+
 def test_fit_frame_leaves_the_global_random_state_alone():
     target, _ = known_target("dog", 64)
     torch.manual_seed(123)

@@ -48,8 +48,10 @@ from handshadow.search.starts import choose_starts
 log = logging.getLogger(__name__)
 QUALITY = ("fast", "default", "best")
 # Polish rounds, at most and only while the result fails the success test: (rounds, further
-# rounds while it is a near miss and still improving).
-POLISH_ROUNDS = {"fast": (1, 0), "default": (2, 4), "best": (3, 6)}
+# rounds while it is a near miss, patience: the near miss's rounds end after this many in a
+# row that bring nothing). Each round's jitter differs; a near miss often passes a few rounds
+# after one that brought nothing (search.finishing.polish).
+POLISH_ROUNDS = {"fast": (1, 0, 1), "default": (2, 8, 3), "best": (3, 12, 4)}
 # --hands auto prefers one hand unless two score better by more than this (rank-key blend).
 ONE_HAND_PREFERENCE = 0.02
 # The stages at full resolution push out what the exact mesh test finds inside other flesh,
@@ -63,7 +65,7 @@ VIEWS_SETTLE = Stage(height=0, blur_px=0, attract_px=2, steps=0, keep=1, lr_scal
 VIEWS_SETTLE_STEPS = {"fast": 60, "default": 80, "best": 100}
 # Several shadows are seldom all met by the search alone: twice the polish's base rounds (a
 # round never hands back worse, and costs a few seconds).
-VIEWS_POLISH_ROUNDS = {"fast": (2, 0), "default": (4, 4), "best": (6, 6)}
+VIEWS_POLISH_ROUNDS = {"fast": (2, 0, 1), "default": (4, 8, 3), "best": (6, 12, 4)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -335,9 +337,11 @@ def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: flo
         chosen.separation_iou = float(iou(problem.shadows(poses)[0], problem.shadows(res.poses)[0]))
         if not res.interrupted:
             views = len(problem.views)
-            rounds, near_rounds = (POLISH_ROUNDS if views == 1 else VIEWS_POLISH_ROUNDS)[config.quality]
+            rounds, near_rounds, patience = (POLISH_ROUNDS if views == 1 else VIEWS_POLISH_ROUNDS)[config.quality]
             generator = torch.Generator(device="cpu").manual_seed(config.seed)
-            poses = polish(problem, poses, rounds, near_rounds, stop=polish_stop, generator=generator)
+            poses = polish(
+                problem, poses, rounds, near_rounds, patience=patience, stop=polish_stop, generator=generator
+            )
     except Interrupted as halt:  # Ctrl-C, stop or the time limit in the finishing steps: keep what they reached
         poses, interrupted = halt.poses, not timed_out
         if timed_out:

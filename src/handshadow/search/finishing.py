@@ -162,6 +162,7 @@ def polish(
     rounds: int = 2,
     near_rounds: int = 0,
     settings: Finishing = Finishing(),
+    patience: int = 1,
     always: bool = False,
     stop: Callable[[], bool] | None = None,
     generator: torch.Generator | None = None,
@@ -172,7 +173,9 @@ def polish(
     and far spills; the best-scoring pose met on the way wins, and only if it scores better
     than the start and overlaps no more. Rounds repeat from the best while the success test
     is not passed: ``rounds`` of them, then up to ``near_rounds`` more while the result is a
-    near miss (:attr:`ViewScores.near_miss`) and the last round improved it. A start that
+    near miss (:attr:`ViewScores.near_miss`) and one of the last ``patience`` rounds improved
+    it (each round's jitter differs, so a round that brings nothing does not end the hunt
+    for the last pixels of a near miss unless ``patience`` is 1). A start that
     already passes is returned as it is unless ``always``. Scores are every view's
     (metrics.ViewScores)."""
     best = poses
@@ -180,15 +183,15 @@ def polish(
         best_score = problem.scores(poses)[0]
         allowed = max(settings.tolerance_mm, problem.mesh_penetration(poses)[0].deepest_mm)
         generator = generator or torch.Generator(device="cpu").manual_seed(0)
-        improved = False
+        stale = patience  # rounds since the last improvement (none yet: a near miss must improve first)
         for i in range(rounds + near_rounds):
             if best_score.success and not always:
                 break
-            if i >= rounds and not (best_score.near_miss and improved):
+            if i >= rounds and not (best_score.near_miss and stale < patience):
                 break
             previous = best_score
             best_score, best = polish_round(problem, best, best_score, settings, allowed, generator, stop)
-            improved = best_score.key() < previous.key()
+            stale = 0 if best_score.key() < previous.key() else stale + 1
     except KeyboardInterrupt:  # between steps, or while scoring the start
         raise Interrupted(best) from None
     return best
