@@ -423,17 +423,10 @@ def holdable(data: dict) -> tuple[dict, str]:
     of a fit part hands that pass through each other and open fingers curled into the palm,
     then the polish brings the shadow back toward the authored one. Returns the pose data and
     a line on what changed."""
-    from handshadow.fit import FitConfig, make_problem
-    from handshadow.hands.posed import cast_shadow
-    from handshadow.posefile import parse_pose
-    from handshadow.poses import HandPoseBatch, PoseBatch
     from handshadow.search import polish, separate
 
-    posed = parse_pose(data)
-    target = cast_shadow(posed)[1] > 0.5
-    sides = [h.side for h in posed.hands]
-    problem = make_problem(target, posed.scene, sides, FitConfig(size=posed.scene.image.height))
-    poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in posed.hands])
+    target, problem, poses = _problem_of(data)
+    sides = [h["side"] for h in data["hands"]]
     before = problem.mesh_penetration(poses)[0].deepest_mm
     poses = polish(problem, separate(problem, lead_back(problem, poses)), rounds=3, always=True)
     after = problem.mesh_penetration(poses)[0].deepest_mm
@@ -441,6 +434,22 @@ def holdable(data: dict) -> tuple[dict, str]:
     shadow = problem.shadows(poses)[0].numpy() > 0.5
     iou = float((shadow & target).sum() / (shadow | target).sum())
     return {**data, "hands": hands}, f"penetration {before:.1f} -> {after:.1f} mm, shadow IoU {iou:.3f}"
+
+
+def _problem_of(data: dict):
+    """(its own shadow (H, W) bool, a search problem fitting it, the pose as a PoseBatch of
+    one) for a pose file's data."""
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.hands.posed import cast_shadow
+    from handshadow.posefile import parse_pose
+    from handshadow.poses import HandPoseBatch, PoseBatch
+
+    posed = parse_pose(data)
+    target = cast_shadow(posed)[1] > 0.5
+    sides = [h.side for h in posed.hands]
+    config = FitConfig(size=posed.scene.image.height, hands=str(len(sides)), device="cpu")
+    problem = make_problem(target, posed.scene, sides, config)
+    return target, problem, PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in posed.hands])
 
 
 # The wrist angles lead_back tries, degrees apart, within the wrist's limits.
@@ -516,19 +525,9 @@ def _lead_back(problem, poses):
 def fix_arms() -> None:
     """Lead back the forearms of the library's poses that do not (lead_back), keeping every
     other value of their files; the poses whose arms are already holdable stay byte for byte."""
-    from handshadow.fit import FitConfig, make_problem
-    from handshadow.hands.posed import cast_shadow
-    from handshadow.posefile import parse_pose
-    from handshadow.poses import HandPoseBatch, PoseBatch
-
     for path in sorted(LIBRARY.glob("*.json")):
         data = json.loads(path.read_text())
-        posed = parse_pose(data)
-        target = cast_shadow(posed)[1] > 0.5
-        sides = [h.side for h in posed.hands]
-        config = FitConfig(size=posed.scene.image.height, hands=str(len(sides)), device="cpu")
-        problem = make_problem(target, posed.scene, sides, config)
-        poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in posed.hands])
+        target, problem, poses = _problem_of(data)
         if problem.holdable(poses)[0]:
             continue
         fixed = lead_back(problem, poses)
