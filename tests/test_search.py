@@ -333,3 +333,23 @@ def test_result_shadow_and_score_are_those_of_the_pose_file():
     assert result.score == score(result.shadow, target)
     assert result.posed.fit["iou"] == round(result.score.iou, 4)
     assert dataclasses.asdict(result.score)["hd95"] == result.score.hd95
+
+
+def test_a_failed_fit_starts_afresh_with_the_next_seed_and_keeps_the_better(monkeypatch):
+    from handshadow import fit as fit_module
+
+    target, _ = known_target("dog", 64)
+    base = FitConfig(hands="1", size=64, quality="fast", iters=2, exclude_library=("dog",))  # far from passing
+    singles = [fit_frame(target, dataclasses.replace(base, seed=s, attempts=1)) for s in (0, 1)]
+    assert not any(r.success for r in singles)
+    seen = []
+    both = fit_frame(target, dataclasses.replace(base, attempts=2), progress=seen.append)
+    assert both.posed.fit["attempts"] == 2 and sorted({p.attempt for p in seen}) == [0, 1]
+    # The better of the two single attempts, to the bit: each attempt is its seed's fit.
+    better = min(range(2), key=lambda k: fit_module.result_key(singles[k]))
+    assert both.posed.fit["attempt"] == better + 1 and both.posed.fit["seed"] == better
+    assert np.array_equal(both.shadow, singles[better].shadow) and both.score == singles[better].score
+    # A success ends the attempts: the first attempt's result, scored as passing, is kept.
+    monkeypatch.setattr(fit_module.FitResult, "success", property(lambda self: True))
+    once = fit_frame(target, dataclasses.replace(base, attempts=3))
+    assert once.posed.fit["attempts"] == 1 and np.array_equal(once.shadow, singles[0].shadow)

@@ -281,7 +281,8 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
         if time.perf_counter() - last > PREVIEW_EVERY_S:
             last = time.perf_counter()
             preview = overlay_preview(target.frame, p.shadow, PREVIEW_ROWS)
-            state = CANCELLING if session.cancel.is_set() else f"Fitting... IoU {p.iou:.3f}"
+            again = f" (a fresh attempt, {p.attempt + 1})" if p.attempt else ""
+            state = CANCELLING if session.cancel.is_set() else f"Fitting{again}... IoU {p.iou:.3f}"
             yield FitUpdate(preview, state + note, fraction=fraction)
     try:
         result_folder, result, lines = job.outcome()

@@ -147,6 +147,8 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
         raise HandshadowError(f"--size must be between 32 and 2048 pixels, got {args.size}")
     if args.iters is not None and args.iters < 1:
         raise HandshadowError(f"--iters must be positive, got {args.iters}")
+    if args.attempts is not None and not 1 <= args.attempts <= 20:
+        raise HandshadowError(f"--attempts must be between 1 and 20, got {args.attempts}")
     config = FitConfig(
         hands=args.hands,
         size=args.size,
@@ -160,6 +162,7 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
         forearm=not args.no_forearm,
         quality=args.quality,
         performers=args.performers,
+        attempts=args.attempts,
     )
     if getattr(args, "view_angle", None) is not None:
         config = dataclasses.replace(config, view_angle_deg=args.view_angle)
@@ -216,6 +219,12 @@ def _add_fit_options(
     )
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--attempts",
+        type=int,
+        help="fresh starts (seed, seed+1, ...) while the result fails the success test, the best kept "
+        "(default: 1 fast, 2 default, 3 best)",
+    )
     p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")
     p.add_argument("--limits", default="anatomical", choices=["anatomical", "paper"], help="joint-limit preset")

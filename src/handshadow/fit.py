@@ -25,7 +25,7 @@ from handshadow.hands.arms import ArmCheck
 from handshadow.hands.limits import JointLimits
 from handshadow.hands.penetration import Penetration, hand_parts, penetration
 from handshadow.hands.posed import PosedMesh, cast_shadows
-from handshadow.metrics import FitScore, Part, iou, score, thin_parts, uncovered_parts
+from handshadow.metrics import FitScore, Part, ViewScores, iou, score, thin_parts, uncovered_parts
 from handshadow.posefile import parse_pose
 from handshadow.poses import PoseBatch, PosedScene
 from handshadow.scene import Scene, check_view_angle, default_views
@@ -66,6 +66,10 @@ VIEWS_SETTLE_STEPS = {"fast": 60, "default": 80, "best": 100}
 # Several shadows are seldom all met by the search alone: twice the polish's base rounds (a
 # round never hands back worse, and costs a few seconds).
 VIEWS_POLISH_ROUNDS = {"fast": (2, 0, 1), "default": (4, 8, 3), "best": (6, 12, 4)}
+# Attempts a fit may make: one that fails the success test starts afresh with the next seed
+# (other random starts, other jitter) and the best result is kept. A fresh seed turned 3 of 15
+# failures into successes where a longer search of the same starts did not.
+ATTEMPTS = {"fast": 1, "default": 2, "best": 3}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,7 +84,9 @@ class FitConfig:
     whose targets are shadows of library poses); performers: 1, or 2 to let two people hold
     the two hands (no limit on how far apart the arms are). With two targets (two views):
     view_angle_deg turns view 1's lamp, wall and frame about the vertical axis through the
-    hands' working volume (scene.Scene.turned); view_weights weighs the views (None: equally)."""
+    hands' working volume (scene.Scene.turned); view_weights weighs the views (None: equally).
+    attempts: fresh starts (seed, seed + 1, ...) while the result fails the success test, the
+    best kept (None: ATTEMPTS of the quality)."""
 
     hands: str = "auto"
     size: int = 256
@@ -99,6 +105,7 @@ class FitConfig:
     atlas: bool = True
     view_angle_deg: float = 90.0
     view_weights: tuple[float, ...] | None = None
+    attempts: int | None = None
 
 
 @dataclasses.dataclass
@@ -269,15 +276,21 @@ def fit_frame(
     view (a list of frames of one size: view 0 lit as today, view 1 turned by
     config.view_angle_deg, see :func:`view_scenes`).
 
+    A fit whose result fails the success test starts afresh with the next seed, up to
+    config.attempts times in all (None: ATTEMPTS of the quality); the best result is kept
+    (:func:`result_key`) and the attempts end at the first success. Progress reports carry
+    their attempt (0 first).
+
     extra_starts: hypotheses (hand slots right first) always tried, as given and aligned to
     the target; anchor: batch-1 poses the solution should stay close to (a morph's other
     end). Either fixes the number of hands to theirs. stop: checked at every step of the
     search and of the finishing steps; True stops the fit as Ctrl-C does (the best result so
     far, marked interrupted; the separation of overlapping hands still runs after a stopped
-    search). config.time_limit_s bounds the search and the polish (not marked interrupted);
-    the separation always completes."""
+    search). config.time_limit_s bounds the search and the polish of all attempts (not marked
+    interrupted); the separation always completes."""
     t0 = time.perf_counter()
     config = dataclasses.replace(config, device=resolve_device(config.device))
+    attempts = attempts_of(config)
     # torch.optim imports torch._dynamo on first use, for seconds; a Ctrl-C inside that import
     # would leave it half-done and break every optimiser after it. Import it before the search,
     # where an interrupt has nothing to lose.
@@ -285,8 +298,50 @@ def fit_frame(
 
     targets = [np.asarray(target, bool)] if isinstance(target, np.ndarray) else [np.asarray(t, bool) for t in target]
     scenes = view_scenes(targets, config)
-    counts = hand_counts(config, extra_starts if extra_starts is not None else anchor)
     limit = config.time_limit_s or None  # seconds; None or 0: no limit
+    best, interrupted, runs = None, False, 0
+    for k in range(attempts):
+        left = None if limit is None else limit - (time.perf_counter() - t0)
+        if best is not None and left is not None and left <= 0:
+            break
+        tell = None if progress is None else (lambda p, k=k: progress(dataclasses.replace(p, attempt=k)))
+        attempt = dataclasses.replace(config, seed=config.seed + k)
+        result = _attempt(targets, scenes, attempt, tell, extra_starts, anchor, stop, left)
+        runs += 1
+        interrupted = interrupted or result.interrupted
+        if best is None or result_key(result) < result_key(best):
+            best, chosen = result, k
+        if best.success or interrupted or (stop is not None and stop()):
+            break
+        if k + 1 < attempts:
+            log.info("attempt %d of %d failed the success test (%s): a fresh start", k + 1, attempts, result.score)
+    seconds = time.perf_counter() - t0
+    fit = dict(best.posed.fit, seconds=round(seconds, 2), interrupted=interrupted, attempt=chosen + 1, attempts=runs)
+    return dataclasses.replace(
+        best, posed=dataclasses.replace(best.posed, fit=fit), seconds=seconds, interrupted=interrupted
+    )
+
+
+def attempts_of(config: FitConfig) -> int:
+    """How many attempts a fit may make: config.attempts, or the quality's (ATTEMPTS)."""
+    attempts = ATTEMPTS[config.quality] if config.attempts is None else config.attempts
+    if attempts < 1:
+        raise HandshadowError(f"a fit needs at least one attempt, got {attempts}")
+    return attempts
+
+
+def result_key(result: FitResult) -> tuple:
+    """Sort key of finished fits, smaller is better: performable first, then the views'
+    success and blend (metrics.ViewScores.key; with one view metrics.rank_key)."""
+    scores = ViewScores(tuple(v.score for v in result.views), tuple(v.weight for v in result.views))
+    return (not result.performable, *scores.key())
+
+
+def _attempt(targets, scenes, config, progress, extra_starts, anchor, stop, limit) -> FitResult:
+    """One attempt: a search per hand count, the chosen one finished and measured. ``limit``
+    bounds its search and polish in seconds (None: no limit)."""
+    t0 = time.perf_counter()
+    counts = hand_counts(config, extra_starts if extra_starts is not None else anchor)
     deadline = limit / len(counts) if limit else None
     searches = []
     for n in counts:

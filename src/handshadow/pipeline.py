@@ -70,15 +70,18 @@ def resolve_target(source: str, width: int, height: int, invert: bool | None = N
 
 class FrameRecorder:
     """Keeps snapshots of the searches (search.Progress) for progress.gif: about ``limit``
-    over ``total_steps``, counted over all of a fit's searches (``--hands auto`` runs one per
-    hand count, each counting its steps from 0). ``done`` is that overall count and
-    ``finished`` says whether the last search has taken its last step."""
+    over ``total_steps``, counted over all of an attempt's searches (``--hands auto`` runs
+    one per hand count, each counting its steps from 0). ``done`` is that count over every
+    attempt so far, ``attempt`` the current attempt (fit.fit_frame starts afresh while a
+    result fails the success test) and ``finished`` says whether its last search has taken
+    its last step."""
 
     def __init__(self, total_steps: int, searches: int = 1, limit: int = 36):
         self.every = max(1, total_steps // limit)
         self.searches = searches
         self.frames: list[Progress] = []
         self.done = 0
+        self.attempt = 0
         self.finished = False
         self._next = 0
         self._offset = 0
@@ -86,7 +89,9 @@ class FrameRecorder:
         self._search = 0
 
     def __call__(self, p: Progress) -> None:
-        if p.done < self._last:  # the next search began
+        if p.attempt != self.attempt:  # a fresh attempt: its searches count from the first
+            self.attempt, self._search = p.attempt, -1
+        if p.done < self._last or self._search < 0:  # the next search began
             self._offset += self._last
             self._search += 1
         self._last = p.done
@@ -103,7 +108,8 @@ def progress_frames(
     """One picture per snapshot: the hands in 3D (from the performer's side) beside their
     shadow over the target, one per view (targets: (H, W) bool, or one per view)."""
     targets = [targets] if isinstance(targets, np.ndarray) else list(targets)
-    frames = [f for f in frames if f.poses.n_hands == len(posed.hands)]  # not the search with the other hand count
+    attempt = posed.fit.get("attempt", 1) - 1  # the attempt that gave the result, not the others
+    frames = [f for f in frames if f.poses.n_hands == len(posed.hands) and f.attempt == attempt]
     models = [load_hand(h.model, h.side, h.shape, None, forearm=posed.forearm) for h in posed.hands]
     with torch.no_grad():  # the snapshots' poses live on the fit's device, these models on the CPU
         vertices = [
@@ -161,18 +167,32 @@ def fit_to_folder(
         if progress_hook is not None:
             progress_hook(p)
         if bar is not None:
-            bar.n = min(total, recorder.done)
+            bar.total = total * (p.attempt + 1)  # a fresh attempt runs the searches again
+            bar.n = min(bar.total, recorder.done)
             bar.set_postfix(iou=f"{p.iou:.3f}")
             # After the last search's last step come the separation, the polish and the export.
-            bar.set_description("finishing" if recorder.finished else "fitting")
+            again = f" (attempt {p.attempt + 1})" if p.attempt else ""
+            bar.set_description(("finishing" if recorder.finished else "fitting") + again)
 
     result = fit_frame(frames[0] if len(frames) == 1 else frames, config, progress=on_progress, stop=stop)
     if bar is not None:
         bar.close()
     done = recorder.frames[-1].done if recorder.frames else 0
     more = tuple(v.shadow.astype(np.float32) for v in result.views[1:])
+    attempt = result.posed.fit.get("attempt", 1) - 1
     recorder.frames.append(
-        Progress(-1, 0, done, max(done, 1), result.shadow.astype(np.float32), result.score.iou, result.poses, {}, more)
+        Progress(
+            -1,
+            0,
+            done,
+            max(done, 1),
+            result.shadow.astype(np.float32),
+            result.score.iou,
+            result.poses,
+            {},
+            more,
+            attempt,
+        )
     )
     pictures = progress_frames(recorder.frames, frames, result.posed)
     lines, guide = _guide(result)

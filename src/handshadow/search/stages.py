@@ -27,7 +27,8 @@ class Progress:
     """What a progress callback sees: stage index, step within it, steps done over all stages,
     their total, the best hypothesis's current shadow (H, W) numpy at the stage resolution
     (view 0's), its IoU, its poses (PoseBatch of batch 1), its loss terms by name, and with
-    several views the other views' shadows (H, W) at the stage resolution."""
+    several views the other views' shadows (H, W) at the stage resolution; the fit's attempt
+    (0 first, fit.fit_frame) it belongs to."""
 
     stage: int
     step: int
@@ -38,6 +39,7 @@ class Progress:
     poses: PoseBatch
     terms: dict[str, float] = dataclasses.field(default_factory=dict)
     more_shadows: tuple[np.ndarray, ...] = ()
+    attempt: int = 0
 
 
 @dataclasses.dataclass
