@@ -344,7 +344,7 @@ def test_a_failed_fit_starts_afresh_with_the_next_seed_and_keeps_the_better(monk
     assert not any(r.success for r in singles)
     seen = []
     both = fit_frame(target, dataclasses.replace(base, attempts=2), progress=seen.append)
-    assert both.posed.fit["attempts"] == 2 and sorted({p.attempt for p in seen}) == [0, 1]
+    assert both.posed.fit["attempts_run"] == 2 and sorted({p.attempt for p in seen}) == [0, 1]
     # The better of the two single attempts, to the bit: each attempt is its seed's fit.
     better = min(range(2), key=lambda k: fit_module.result_key(singles[k]))
     assert both.posed.fit["attempt"] == better + 1 and both.posed.fit["seed"] == better
@@ -352,4 +352,4 @@ def test_a_failed_fit_starts_afresh_with_the_next_seed_and_keeps_the_better(monk
     # A success ends the attempts: the first attempt's result, scored as passing, is kept.
     monkeypatch.setattr(fit_module.FitResult, "success", property(lambda self: True))
     once = fit_frame(target, dataclasses.replace(base, attempts=3))
-    assert once.posed.fit["attempts"] == 1 and np.array_equal(once.shadow, singles[0].shadow)
+    assert once.posed.fit["attempts_run"] == 1 and np.array_equal(once.shadow, singles[0].shadow)

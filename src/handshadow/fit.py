@@ -316,7 +316,9 @@ def fit_frame(
         if k + 1 < attempts:
             log.info("attempt %d of %d failed the success test (%s): a fresh start", k + 1, attempts, result.score)
     seconds = time.perf_counter() - t0
-    fit = dict(best.posed.fit, seconds=round(seconds, 2), interrupted=interrupted, attempt=chosen + 1, attempts=runs)
+    fit = dict(
+        best.posed.fit, seconds=round(seconds, 2), interrupted=interrupted, attempt=chosen + 1, attempts_run=runs
+    )
     return dataclasses.replace(
         best, posed=dataclasses.replace(best.posed, fit=fit), seconds=seconds, interrupted=interrupted
     )
