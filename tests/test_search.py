@@ -335,21 +335,31 @@ def test_result_shadow_and_score_are_those_of_the_pose_file():
     assert dataclasses.asdict(result.score)["hd95"] == result.score.hd95
 
 
-def test_a_failed_fit_starts_afresh_with_the_next_seed_and_keeps_the_better(monkeypatch):
+def test_a_failed_fit_starts_afresh_with_fresh_starts_and_keeps_the_better(monkeypatch):
     from handshadow import fit as fit_module
+    from handshadow.search.starts import start_key
 
     target, _ = known_target("dog", 64)
     base = FitConfig(hands="1", size=64, quality="fast", iters=2, exclude_library=("dog",))  # far from passing
-    singles = [fit_frame(target, dataclasses.replace(base, seed=s, attempts=1)) for s in (0, 1)]
-    assert not any(r.success for r in singles)
+    single = fit_frame(target, dataclasses.replace(base, attempts=1))
+    assert not single.success
+    attempts, starts = [], []
+    real_attempt, real_choose = fit_module._attempt, fit_module.choose_starts
+    monkeypatch.setattr(fit_module, "_attempt", lambda *a, **k: attempts.append(real_attempt(*a, **k)) or attempts[-1])
+    monkeypatch.setattr(fit_module, "choose_starts", lambda *a, **k: starts.append(real_choose(*a, **k)) or starts[-1])
     seen = []
     both = fit_frame(target, dataclasses.replace(base, attempts=2), progress=seen.append)
     assert both.posed.fit["attempts_run"] == 2 and sorted({p.attempt for p in seen}) == [0, 1]
-    # The better of the two single attempts, to the bit: each attempt is its seed's fit.
-    better = min(range(2), key=lambda k: fit_module.result_key(singles[k]))
-    assert both.posed.fit["attempt"] == better + 1 and both.posed.fit["seed"] == better
-    assert np.array_equal(both.shadow, singles[better].shadow) and both.score == singles[better].score
+    # The first attempt is the single fit, to the bit; the second searched none of its
+    # library and atlas starts again, with the next seed.
+    assert np.array_equal(attempts[0].shadow, single.shadow) and attempts[0].score == single.score
+    keys = [{start_key(o) for o in s.origins} - {None} for s in starts]
+    assert keys[0] and not keys[0] & keys[1] and attempts[1].posed.fit["seed"] == 1
+    # The better attempt is kept.
+    better = min(range(2), key=lambda k: fit_module.result_key(attempts[k]))
+    assert both.posed.fit["attempt"] == better + 1 and both.score == attempts[better].score
+    assert np.array_equal(both.shadow, attempts[better].shadow)
     # A success ends the attempts: the first attempt's result, scored as passing, is kept.
     monkeypatch.setattr(fit_module.FitResult, "success", property(lambda self: True))
     once = fit_frame(target, dataclasses.replace(base, attempts=3))
-    assert once.posed.fit["attempts_run"] == 1 and np.array_equal(once.shadow, singles[0].shadow)
+    assert once.posed.fit["attempts_run"] == 1 and np.array_equal(once.shadow, single.shadow)

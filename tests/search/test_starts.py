@@ -55,3 +55,20 @@ def test_starts_whose_arms_can_be_held_come_first():
     assert not all(problem.holdable(drawn))  # random hands often point a forearm at the wall
     starts = choose_starts(problem, ["right", "left"], 16, 12, np.random.default_rng(0))
     assert starts.batch == 12 and all(problem.holdable(starts))
+
+
+def test_a_later_attempt_starts_from_the_library_and_atlas_starts_not_yet_searched():
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.search.atlas import load_atlas
+    from handshadow.search.starts import choose_starts, start_key
+
+    target, truth = known_target("bird", 64)
+    problem = make_problem(target, truth.scene, ["right", "left"], FitConfig(size=64))
+    atlas = load_atlas("anny", True, "anatomical")
+    sides = ["right", "left"]
+    first = choose_starts(problem, sides, 16, 12, np.random.default_rng(0), atlas=atlas)
+    tried = {start_key(o) for o in first.origins} - {None}
+    assert tried  # the library and the atlas gave starts
+    second = choose_starts(problem, sides, 16, 12, np.random.default_rng(1), atlas=atlas, skip=frozenset(tried))
+    assert second.batch == 12 and not tried & {start_key(o) for o in second.origins}
+    assert all(problem.holdable(second))  # still holdable ones first

@@ -280,13 +280,16 @@ def choose_starts(
     given: PoseBatch | None = None,
     exclude: tuple[str, ...] = (),
     atlas: Atlas | None = None,
+    skip: frozenset = frozenset(),
 ) -> PoseBatch:
     """The search's starts: library poses (but those named in ``exclude``), ``n_random``
     random hands (drawn RANDOM_OVERSAMPLE times over, holdable ones first) and, given an atlas, its entries nearest the target (:func:`atlas_starts`),
     each aligned to the target in 2D, the best ``n_keep`` by IoU, those whose arms can be
     held (Problem.holdable) first (at most PER_LIBRARY_POSE
     from any one library pose and ATLAS_SHARE from the atlas, so the starts stay diverse). ``given`` starts (one PoseBatch,
-    e.g. a morph's other end) are always kept, both as given and aligned.
+    e.g. a morph's other end) are always kept, both as given and aligned. ``skip``: library
+    and atlas starts an earlier attempt searched (:func:`start_key`); they rank behind every
+    other start whose arms can be held.
     With several views each candidate is also turned about the vertical (:func:`view_turns_rad`),
     each is aligned to each view's target in turn and judged in every view
     (:func:`views_start_score`); the atlas answers view 0's target.
@@ -312,6 +315,9 @@ def choose_starts(
     # about the lamp's axis and moves them along it or parallel to the wall): the arms term
     # would have to turn the others, undoing their alignment.
     held = torch.as_tensor(problem.holdable(moved), device=overlap.device)
+    if skip:  # an earlier attempt searched these: the next best instead
+        tried = torch.tensor([start_key(o) in skip for o in moved.origins], device=overlap.device)
+        held = held & ~tried
     order = torch.argsort(overlap - 2.0 * (~held).to(overlap.dtype), descending=True).tolist()
     picked = list(range(cand.batch - given.batch, cand.batch)) if given is not None else []  # aligned
     per_pose: dict[str, int] = {}
@@ -331,6 +337,14 @@ def choose_starts(
     log.info("starts: %s", ", ".join(f"{moved.origins[i]} {float(overlap[i]):.2f}" for i in picked[:8]))
     chosen = moved.select(picked)
     return PoseBatch.cat([cand.select(slice(cand.batch - given.batch, None)), chosen]) if given is not None else chosen
+
+
+def start_key(origin) -> tuple | None:
+    """What identifies a library or atlas start across attempts (kind, name, mirrored);
+    None for random and given starts."""
+    if origin.kind not in ("library", "atlas"):
+        return None
+    return origin.kind, origin.name, origin.mirrored
 
 
 def start_score(shadows: torch.Tensor, maps) -> torch.Tensor:
