@@ -177,18 +177,21 @@ def test_ctrl_c_writes_the_best_result_so_far(tmp_path):
     assert pose["fit"]["interrupted"] is True and len(pose["hands"]) == 2
 
 
-def test_frame_recorder_counts_over_both_searches_of_hands_auto():
+def test_frame_recorder_counts_over_both_searches_of_hands_auto_and_every_attempt():
     from types import SimpleNamespace
 
     from handshadow.pipeline import FrameRecorder
 
     recorder = FrameRecorder(total_steps=200, searches=2, limit=10)
     seen = []
-    for n_hands in (1, 2):  # each search counts its own steps from 0
-        for done in range(1, 101):
-            recorder(SimpleNamespace(done=done, total=100, poses=SimpleNamespace(n_hands=n_hands)))
-            seen.append((recorder.done, recorder.finished))
-    assert [d for d, _ in seen] == list(range(1, 201))
-    assert [f for _, f in seen] == [False] * 199 + [True]  # finished only after the last search
-    per_search = [sum(f.poses.n_hands == n for f in recorder.frames) for n in (1, 2)]
-    assert min(per_search) >= 5  # both searches are in the GIF's snapshots
+    for attempt in (0, 1):  # a failed fit's second attempt runs both searches again
+        for n_hands in (1, 2):  # each search counts its own steps from 0
+            for done in range(1, 101):
+                recorder(SimpleNamespace(done=done, total=100, poses=SimpleNamespace(n_hands=n_hands), attempt=attempt))
+                seen.append((recorder.done, recorder.finished, recorder.attempt))
+    assert [d for d, _, _ in seen] == list(range(1, 401))
+    # finished only after each attempt's last search
+    assert [f for _, f, _ in seen] == ([False] * 199 + [True]) * 2
+    assert [a for _, _, a in seen] == [0] * 200 + [1] * 200
+    per_search = [sum(f.poses.n_hands == n and f.attempt == 1 for f in recorder.frames) for n in (1, 2)]
+    assert min(per_search) >= 5  # both searches of an attempt are in the GIF's snapshots

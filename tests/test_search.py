@@ -363,3 +363,21 @@ def test_a_failed_fit_starts_afresh_with_fresh_starts_and_keeps_the_better(monke
     monkeypatch.setattr(fit_module.FitResult, "success", property(lambda self: True))
     once = fit_frame(target, dataclasses.replace(base, attempts=3))
     assert once.posed.fit["attempts_run"] == 1 and np.array_equal(once.shadow, single.shadow)
+
+
+def test_a_stop_in_a_later_attempt_keeps_the_best_so_far(monkeypatch):
+    from handshadow import fit as fit_module
+
+    target, _ = known_target("dog", 64)
+    base = FitConfig(hands="1", size=64, quality="fast", iters=4, exclude_library=("dog",), attempts=3)
+    attempts, seen = [], []
+    real_attempt = fit_module._attempt
+    monkeypatch.setattr(fit_module, "_attempt", lambda *a, **k: attempts.append(real_attempt(*a, **k)) or attempts[-1])
+    # Stop at the second attempt's second step, as Ctrl-C would.
+    result = fit_frame(
+        target, base, progress=seen.append, stop=lambda: bool(seen) and seen[-1].attempt == 1 and seen[-1].done >= 2
+    )
+    assert len(attempts) == 2 and not attempts[0].interrupted and attempts[1].interrupted
+    assert result.interrupted and result.posed.fit["interrupted"] is True and result.posed.fit["attempts_run"] == 2
+    better = min(range(2), key=lambda k: fit_module.result_key(attempts[k]))
+    assert result.score == attempts[better].score and np.array_equal(result.shadow, attempts[better].shadow)
