@@ -279,9 +279,9 @@ def fit_frame(
     config.view_angle_deg, see :func:`view_scenes`).
 
     A fit whose result fails the success test starts afresh with the next seed and from
-    library and atlas starts not searched yet, up to config.attempts times in all (None: ATTEMPTS of the quality); the best result is kept
-    (:func:`result_key`) and the attempts end at the first success. Progress reports carry
-    their attempt (0 first).
+    library and atlas starts not searched yet, up to config.attempts times in all (None:
+    ATTEMPTS of the quality); the best result is kept (:func:`result_key`) and the attempts
+    end at the first success. Progress reports carry their attempt (0 first).
 
     extra_starts: hypotheses (hand slots right first) always tried, as given and aligned to
     the target; anchor: batch-1 poses the solution should stay close to (a morph's other

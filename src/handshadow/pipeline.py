@@ -178,22 +178,18 @@ def fit_to_folder(
     if bar is not None:
         bar.close()
     done = recorder.frames[-1].done if recorder.frames else 0
-    more = tuple(v.shadow.astype(np.float32) for v in result.views[1:])
-    attempt = result.posed.fit.get("attempt", 1) - 1
-    recorder.frames.append(
-        Progress(
-            -1,
-            0,
-            done,
-            max(done, 1),
-            result.shadow.astype(np.float32),
-            result.score.iou,
-            result.poses,
-            {},
-            more,
-            attempt,
-        )
+    last = Progress(
+        stage=-1,
+        step=0,
+        done=done,
+        total=max(done, 1),
+        shadow=result.shadow.astype(np.float32),
+        iou=result.score.iou,
+        poses=result.poses,
+        more_shadows=tuple(v.shadow.astype(np.float32) for v in result.views[1:]),
+        attempt=result.posed.fit.get("attempt", 1) - 1,
     )
+    recorder.frames.append(last)
     pictures = progress_frames(recorder.frames, frames, result.posed)
     lines, guide = _guide(result)
     with ResultFolder(out, force) as folder:
