@@ -107,3 +107,18 @@ def test_thin_coverage_is_zero_when_a_finger_lies_on_the_thin_part():
     # With no thin parts there is nothing to reach.
     blob = _maps((yy - 32) ** 2 + (xx - 32) ** 2 <= 20**2)  # a disc has no thin parts
     assert float(losses.thin_coverage(off, blob)[0]) == 0.0
+
+
+def test_square_closing_equals_the_max_pool_closing_to_the_bit():
+    gen = torch.Generator().manual_seed(3)
+    pool = torch.nn.functional.max_pool2d
+    for radius in (1, 2, 3):
+        k = 2 * radius + 1
+        noise = (torch.rand(3, 40, 56, generator=gen) > 0.6).float()
+        shapes = torch.zeros(2, 40, 56)
+        shapes[:, 5:30, 0:20] = 1  # touches the border
+        shapes[:, 12:14, 2:18] = 0  # a slit the closing fills
+        shapes[1, 20:22, 30:56] = 1
+        for masks in (noise, shapes):
+            expected = -pool(-pool(masks[:, None], k, 1, radius), k, 1, radius)[:, 0]
+            assert torch.equal(losses.square_closing(masks, radius), expected)

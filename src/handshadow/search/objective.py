@@ -236,8 +236,14 @@ def _arms_term(
 def _image_maps(level: Level, blur: float, w: Weights) -> tuple[torch.Tensor, torch.Tensor]:
     """The blurred target (H, W) and the image term's pixel weights (H, W) at a level: 1, plus
     the target's thin parts, plus depth inside it, plus (when set) distance outside it and its
-    holes and notches. Constant through a stage."""
-    maps = level.maps
+    holes and notches. Constant through a stage, so computed once per level, blur and weights."""
+    key = ("image_maps", blur, w.thin, w.depth, w.depth_cap, w.spill, w.notches)
+    if key not in level.derived:
+        level.derived[key] = _build_image_maps(level.maps, blur, w)
+    return level.derived[key]
+
+
+def _build_image_maps(maps, blur: float, w: Weights) -> tuple[torch.Tensor, torch.Tensor]:
     target = gaussian_blur(maps.target[None], blur)[0]
     weight = (
         1.0

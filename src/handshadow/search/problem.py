@@ -38,6 +38,9 @@ class Level:
     renderer: ShadowRenderer
     maps: TargetMaps
     scale: float
+    # Maps derived from the target that stay constant through a stage (search.objective's
+    # image weights per blur and weights), computed once.
+    derived: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
 
 
 @dataclasses.dataclass(frozen=True)
