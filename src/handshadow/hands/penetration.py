@@ -181,7 +181,8 @@ def _inside(query_pos, query_idx, verts, tri, mesh, other, report_mm, n_surface=
     """Contacts of the query vertices (indices into query_pos) inside the closed (verts, tri);
     the nearest point is sought on its first n_surface triangles (the skin, not a part's caps)."""
     pts = query_pos[query_idx]
-    lo, hi = verts.min(0), verts.max(0)
+    corners = verts[tri].reshape(-1, 3)  # the surface's own vertices (verts may hold the whole hand's)
+    lo, hi = corners.min(0), corners.max(0)
     near = np.all((pts >= lo) & (pts <= hi), 1)  # only points in the surface's box can be inside
     if not near.any():
         return Contacts.empty()
