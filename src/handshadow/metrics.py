@@ -107,20 +107,45 @@ def _distance_to(mask_outline: np.ndarray) -> np.ndarray:
 
 
 def boundary_f1(shadow: np.ndarray, target: np.ndarray, tol_px: float = 2.0) -> float:
-    a, b = outline(shadow), outline(target)
-    if not a.any() or not b.any():
-        return float(a.any() == b.any())
-    precision = (_distance_to(b)[a] <= tol_px).mean()
-    recall = (_distance_to(a)[b] <= tol_px).mean()
-    return float(2 * precision * recall / (precision + recall)) if precision + recall else 0.0
+    return _boundary_f1(_Outlines.of(shadow, target), tol_px)
 
 
 def hd95(shadow: np.ndarray, target: np.ndarray) -> float:
-    a, b = outline(shadow), outline(target)
-    if not a.any() or not b.any():
-        return 1.0 if a.any() != b.any() else 0.0
-    d = np.concatenate([_distance_to(b)[a], _distance_to(a)[b]])
-    return float(np.percentile(d, 95) / shadow.shape[0])
+    return _hd95(_Outlines.of(shadow, target), shadow.shape[0])
+
+
+@dataclasses.dataclass(frozen=True)
+class _Outlines:
+    """Both outlines and, when both exist, each outline pixel's distance to the other outline
+    (shadow_to_target over the shadow's outline pixels, target_to_shadow likewise): what the
+    boundary F1 and the HD95 share, worked out once."""
+
+    shadow: np.ndarray
+    target: np.ndarray
+    shadow_to_target: np.ndarray | None = None
+    target_to_shadow: np.ndarray | None = None
+
+    @staticmethod
+    def of(shadow: np.ndarray, target: np.ndarray) -> _Outlines:
+        a, b = outline(shadow), outline(target)
+        if not a.any() or not b.any():
+            return _Outlines(a, b)
+        return _Outlines(a, b, _distance_to(b)[a], _distance_to(a)[b])
+
+
+def _boundary_f1(o: _Outlines, tol_px: float) -> float:
+    if o.shadow_to_target is None:
+        return float(o.shadow.any() == o.target.any())
+    precision = (o.shadow_to_target <= tol_px).mean()
+    recall = (o.target_to_shadow <= tol_px).mean()
+    return float(2 * precision * recall / (precision + recall)) if precision + recall else 0.0
+
+
+def _hd95(o: _Outlines, height: int) -> float:
+    if o.shadow_to_target is None:
+        return 1.0 if o.shadow.any() != o.target.any() else 0.0
+    d = np.concatenate([o.shadow_to_target, o.target_to_shadow])
+    return float(np.percentile(d, 95) / height)
 
 
 def thin_parts(target: np.ndarray) -> np.ndarray:
@@ -138,8 +163,12 @@ def thin_recall(shadow: np.ndarray, target: np.ndarray, thin: np.ndarray | None 
 def score(shadow: np.ndarray, target: np.ndarray, thin: np.ndarray | None = None) -> FitScore:
     """All four measures; thin: the target's thin parts when already known (thin_parts)."""
     shadow, target = np.asarray(shadow, bool), np.asarray(target, bool)
+    outlines = _Outlines.of(shadow, target)  # the boundary F1 and the HD95 share the distances
     return FitScore(
-        iou(shadow, target), boundary_f1(shadow, target), hd95(shadow, target), thin_recall(shadow, target, thin)
+        iou(shadow, target),
+        _boundary_f1(outlines, 2.0),
+        _hd95(outlines, shadow.shape[0]),
+        thin_recall(shadow, target, thin),
     )
 
 
