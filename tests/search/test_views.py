@@ -76,3 +76,31 @@ def test_hands_too_near_the_second_wall_are_moved_off_it():
         lo, hi = view.scene.light_depth_range()
         assert float(heights.min()) >= lo + 0.004 and float(heights.max()) <= hi - 0.004
     assert np.isclose(float(kept.hands[0].translation[0, 2]), float(near_wall.hands[0].translation[0, 2]))
+
+
+def test_the_objective_keeps_its_image_maps_per_weights_and_blur():
+    """The image maps are worked out once per level, blur and weights: a problem that has
+    seen other weights and blurs gives the same terms as a fresh one."""
+    import dataclasses
+
+    target, scene, poses = _dog()
+    config = FitConfig(size=SIZE, device="cpu")
+    used = make_problem(target, scene, ["right"], config)
+    w = used.weights
+    variants = [w] + [
+        dataclasses.replace(w, **{k: 2 * getattr(w, k) + 1}) for k in ("thin", "depth", "spill", "notches")
+    ]
+    variants.append(dataclasses.replace(w, depth_cap=w.depth_cap / 2))
+    stages = (STAGE, dataclasses.replace(STAGE, blur_px=0))
+    for weights in variants:
+        for stage in stages:
+            objective(used, poses.hands, stage, weights)
+    for weights in variants[::-1]:
+        for stage in stages[::-1]:
+            fresh = make_problem(target, scene, ["right"], config)
+            seen, _ = objective(used, poses.hands, stage, weights)
+            new, _ = objective(fresh, poses.hands, stage, weights)
+            assert torch.equal(seen.image, new.image)
+    spilled, _ = objective(used, poses.hands, STAGE, variants[3])
+    plain, _ = objective(used, poses.hands, STAGE)
+    assert float(spilled.image[1]) > float(plain.image[1])  # the moved pose spills: spill weighs it more
