@@ -36,3 +36,24 @@ def test_an_entrys_own_shadow_retrieves_it():
         turned = torch.rot90(torch.as_tensor(atlas.masks[i], dtype=torch.float32), 1, [0, 1])
         nearest = atlas.nearest(shape_descriptor(turned[None])[0].numpy(), 3)
         assert i in nearest
+
+
+def test_an_atlas_of_hands_without_forearms_builds(monkeypatch):
+    """A hand without a forearm has no forearm axis: its entries turn the way the arm would go
+    (from the middle finger's base back through the wrist) and are seen from any direction."""
+    from handshadow.hands import load_hand
+    from handshadow.hands.limits import JointLimits
+    from handshadow.search import atlas as atlas_module
+
+    monkeypatch.setattr(atlas_module, "CONFIGS", 6)
+    monkeypatch.setattr(atlas_module, "RINGS", 2)
+    model = load_hand("anny", "right", forearm=False)
+    atlas = atlas_module.build_atlas(model, JointLimits.preset("anatomical", "right"))
+    n = 8 * atlas_module.VIEWS
+    assert len(atlas.masks) == n and atlas.poses.batch == n
+    assert atlas.masks.reshape(n, -1).any(1).all()  # every entry casts a shadow in the frame
+    with torch.no_grad():
+        out = model(*atlas.poses.args())
+    arm = atlas_module.arm_axis(out)
+    toward_lamp = (arm / arm.norm(dim=1, keepdim=True))[:, 2]
+    assert float((toward_lamp > 0.98).float().mean()) < 0.25  # not mostly along the beam, as a forearm's are

@@ -28,6 +28,7 @@ import torch.nn.functional as F
 from handshadow.hands import load_hand
 from handshadow.hands.kinematics import rotvec_to_rotmat
 from handshadow.hands.limits import JointLimits
+from handshadow.hands.rig import KEYPOINT_NAMES
 from handshadow.paths import cache_dir
 from handshadow.poses import HandPoseBatch
 from handshadow.scene import Scene
@@ -144,17 +145,26 @@ def wrist_angles(n: int, limits: JointLimits, rng: np.random.Generator) -> np.nd
     return out
 
 
-def arm_directions(n: int, rng: np.random.Generator) -> np.ndarray:
+def arm_directions(n: int, rng: np.random.Generator, hidden_share: float = HIDDEN_SHARE) -> np.ndarray:
     """(n, 3) unit directions for the forearm (wrist to elbow), world frame, in VIEWS-long
-    runs: the first HIDDEN_SHARE of each run within HIDDEN_CONE_DEG of the ray toward the lamp
-    (+z), the rest any way at all."""
+    runs: the first ``hidden_share`` of each run within HIDDEN_CONE_DEG of the ray toward the
+    lamp (+z), the rest any way at all."""
     tilt = np.radians(HIDDEN_CONE_DEG) * np.sqrt(rng.uniform(size=n))
     azimuth = rng.uniform(0, 2 * np.pi, n)
     toward_lamp = np.stack([np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), np.cos(tilt)], 1)
     free = rng.normal(size=(n, 3))
     free /= np.linalg.norm(free, axis=1, keepdims=True)
-    hidden = (np.arange(n) % VIEWS) < round(VIEWS * HIDDEN_SHARE)
+    hidden = (np.arange(n) % VIEWS) < round(VIEWS * hidden_share)
     return np.where(hidden[:, None], toward_lamp, free)
+
+
+def arm_axis(out) -> torch.Tensor:
+    """(B, 3) the direction from the wrist toward the elbow of posed hands (HandOutput): along
+    the forearm's axis, or for a hand without one, from the middle finger's base back through
+    the wrist (the way the arm would go)."""
+    if out.forearm_points.shape[1]:
+        return out.forearm_points[:, -1] - out.forearm_points[:, 0]
+    return out.keypoints[:, 0] - out.keypoints[:, KEYPOINT_NAMES.index("middle1")]
 
 
 def turn_onto(a: np.ndarray, b: np.ndarray, roll: np.ndarray) -> np.ndarray:
@@ -183,12 +193,11 @@ def build_atlas(model, limits: JointLimits, seed: int = 0, batch: int = 256) -> 
     pose = configs.repeat_interleave(VIEWS, 0)
     wrist = torch.as_tensor(wrist_angles(n, limits, rng), dtype=torch.float32)
     with torch.no_grad():  # each entry's forearm direction in its hand frame, its wrist bent
-        axis = model(pose, wrist_rad=wrist).forearm_points
-        axis = (axis[:, -1] - axis[:, 0]).double().numpy()
+        axis = arm_axis(model(pose, wrist_rad=wrist)).double().numpy()
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    rotation = torch.as_tensor(
-        turn_onto(axis, arm_directions(n, rng), rng.uniform(0, 2 * np.pi, n)), dtype=torch.float32
-    )
+    # A hand without a forearm has nothing to hide along the beam: every view any way at all.
+    directions = arm_directions(n, rng, HIDDEN_SHARE if model.has_forearm else 0.0)
+    rotation = torch.as_tensor(turn_onto(axis, directions, rng.uniform(0, 2 * np.pi, n)), dtype=torch.float32)
     translation = torch.tensor([0.0, 0.0, WRIST_DEPTH_M]).expand(n, 3).clone()
     poses = HandPoseBatch(pose, rotation, translation, wrist)
     scene = Scene.default(FRAME_PX, FRAME_PX)
