@@ -4,7 +4,7 @@ success). It runs on `handshadow batch` (Dask), so it scales out with --workers 
 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
                         [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
-                        [--fits-only]
+                        [--fits-only] [--no-forearm]
 
 Prints one row per target as it finishes: the shadow's measures, the deepest penetration
 between or within the hands (pen, mm, exact on the meshes), whether the pose can be held
@@ -59,6 +59,9 @@ def main() -> None:
     parser.add_argument("--names", help="comma-separated file stems to run (a subset)")
     parser.add_argument("--out", default="out/bench", help="folder for the results, contact sheet and rows")
     parser.add_argument("--device", default="cpu")
+    parser.add_argument(
+        "--no-forearm", action="store_true", help="hands without forearms (handshadow fit --no-forearm)"
+    )
     parser.add_argument("--workers", type=int, default=1, help="local Dask workers, each fitting one target at a time")
     parser.add_argument("--threads-per-worker", type=int, help="torch threads per worker (default: cores / workers)")
     parser.add_argument("--scheduler", help="an existing Dask cluster instead of a local one")
@@ -79,14 +82,17 @@ def main() -> None:
     threads = args.threads_per_worker or max(1, cores // args.workers)
     where = args.scheduler or f"{args.workers} workers x {threads} torch threads"
     print(
-        f"{len(targets)} targets, hands={args.hands}, size={args.size}, quality={args.quality}, device={args.device}, {where}"
+        f"{len(targets)} targets, hands={args.hands}, size={args.size}, quality={args.quality}, device={args.device},"
+        f" forearms={'no' if args.no_forearm else 'yes'}, {where}"
     )
     print(
         f"{'target':24s} {'IoU':>6s} {'F1@2':>6s} {'HD95':>6s} {'thin':>6s} {'pen':>5s} {'perf':>4s} {'shadow':>6s}"
         f" {'ok':>3s} {'s':>6s}",
         flush=True,
     )
-    config = FitConfig(hands=args.hands, size=args.size, quality=args.quality, device=args.device)
+    config = FitConfig(
+        hands=args.hands, size=args.size, quality=args.quality, device=args.device, forearm=not args.no_forearm
+    )
     if args.fits_only:
         fits_only(targets, config, args.workers, threads)
         return
