@@ -29,6 +29,7 @@ NEAR_MISS_HD95 = 0.01  # how far past the HD95 bar a result still counts as a ne
 # much thin-part recall, minus this much HD95 (a share of the frame, so 0.01 weighs 0.04).
 RANK_THIN = 0.5
 RANK_HD95 = 4.0
+BOUNDARY_TOL_PX = 2.0  # the boundary F1 counts outline pixels within this distance of the other outline
 # Parts of a target a shadow misses (or shadow it adds), as a person would name them: slivers
 # along the outline are not parts (a part reaches PART_MIN_DEPTH_PX, or PART_DEPTH_SHARE of the
 # frame height when that is more, from its edge: at least 3 px across), nor are pieces smaller
@@ -106,7 +107,7 @@ def _distance_to(mask_outline: np.ndarray) -> np.ndarray:
     return ndimage.distance_transform_edt(~mask_outline)
 
 
-def boundary_f1(shadow: np.ndarray, target: np.ndarray, tol_px: float = 2.0) -> float:
+def boundary_f1(shadow: np.ndarray, target: np.ndarray, tol_px: float = BOUNDARY_TOL_PX) -> float:
     return _boundary_f1(_Outlines.of(shadow, target), tol_px)
 
 
@@ -166,7 +167,7 @@ def score(shadow: np.ndarray, target: np.ndarray, thin: np.ndarray | None = None
     outlines = _Outlines.of(shadow, target)  # the boundary F1 and the HD95 share the distances
     return FitScore(
         iou(shadow, target),
-        _boundary_f1(outlines, 2.0),
+        _boundary_f1(outlines, BOUNDARY_TOL_PX),
         _hd95(outlines, shadow.shape[0]),
         thin_recall(shadow, target, thin),
     )
