@@ -4,7 +4,7 @@ success). It runs on `handshadow batch` (Dask), so it scales out with --workers 
 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
                         [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
-                        [--fits-only] [--no-forearm]
+                        [--fits-only] [--no-forearm] [--lamp-distance M]
 
 Prints one row per target as it finishes: the shadow's measures, the deepest penetration
 between or within the hands (pen, mm, exact on the meshes), whether the pose can be held
@@ -39,6 +39,7 @@ from scipy import ndimage
 from handshadow.batch import find_targets, run_batch
 from handshadow.fit import FitConfig
 from handshadow.hands.penetration import TOLERANCE_MM as PENETRATION_TOLERANCE_MM
+from handshadow.scene import LAMP_TO_WALL_M
 
 #: Columns of the table; every other measure of the fit is printed after them as key=value.
 TABLE = {"iou": "IoU", "boundary_f1": "F1@2", "hd95": "HD95", "thin_recall": "thin"}
@@ -62,6 +63,12 @@ def main() -> None:
     parser.add_argument(
         "--no-forearm", action="store_true", help="hands without forearms (handshadow fit --no-forearm)"
     )
+    parser.add_argument(
+        "--lamp-distance",
+        type=float,
+        default=LAMP_TO_WALL_M,
+        help="metres from lamp to wall (handshadow fit --lamp-distance)",
+    )
     parser.add_argument("--workers", type=int, default=1, help="local Dask workers, each fitting one target at a time")
     parser.add_argument("--threads-per-worker", type=int, help="torch threads per worker (default: cores / workers)")
     parser.add_argument("--scheduler", help="an existing Dask cluster instead of a local one")
@@ -83,7 +90,7 @@ def main() -> None:
     where = args.scheduler or f"{args.workers} workers x {threads} torch threads"
     print(
         f"{len(targets)} targets, hands={args.hands}, size={args.size}, quality={args.quality}, device={args.device},"
-        f" forearms={'no' if args.no_forearm else 'yes'}, {where}"
+        f" forearms={'no' if args.no_forearm else 'yes'}, lamp {args.lamp_distance:g} m, {where}"
     )
     print(
         f"{'target':24s} {'IoU':>6s} {'F1@2':>6s} {'HD95':>6s} {'thin':>6s} {'pen':>5s} {'perf':>4s} {'shadow':>6s}"
@@ -91,7 +98,12 @@ def main() -> None:
         flush=True,
     )
     config = FitConfig(
-        hands=args.hands, size=args.size, quality=args.quality, device=args.device, forearm=not args.no_forearm
+        hands=args.hands,
+        size=args.size,
+        quality=args.quality,
+        device=args.device,
+        forearm=not args.no_forearm,
+        lamp_to_wall_m=args.lamp_distance,
     )
     if args.fits_only:
         fits_only(targets, config, args.workers, threads)

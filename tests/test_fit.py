@@ -18,7 +18,7 @@ from handshadow.cli import main
 from handshadow.fit import FitConfig, fit_frame
 from handshadow.hands.posed import cast_shadow
 from handshadow.library import load_library_pose
-from handshadow.scene import Scene
+from handshadow.scene import LAMP_TO_WALL_M, Scene
 
 PY = [sys.executable, "-m", "handshadow.cli"]
 OUTPUTS = {
@@ -34,19 +34,26 @@ OUTPUTS = {
 }
 
 
-def known_target(name: str, size: int):
-    """The exact shadow of a library pose at a size, and that pose (a PosedScene)."""
+def known_target(name: str, size: int, lamp_to_wall_m: float = LAMP_TO_WALL_M):
+    """The exact shadow of a library pose at a size, and that pose (a PosedScene). Under a
+    farther lamp the hands move away from the wall by as much, so the shadow keeps its size."""
     posed = load_library_pose(name)
-    posed = dataclasses.replace(posed, scene=Scene.default(size, size))
+    shift = np.array([0.0, 0.0, lamp_to_wall_m - LAMP_TO_WALL_M])
+    hands = tuple(dataclasses.replace(h, translation=h.translation + shift) for h in posed.hands)
+    posed = dataclasses.replace(posed, hands=hands, scene=Scene.default(size, size, lamp_to_wall_m=lamp_to_wall_m))
     return cast_shadow(posed)[1] > 0.5, posed
 
 
-def test_fit_recovers_a_shadow_rendered_from_a_known_pose():
-    target, truth = known_target("dog", 128)
+@pytest.mark.parametrize("lamp_to_wall_m", [LAMP_TO_WALL_M, 4.0])
+def test_fit_recovers_a_shadow_rendered_from_a_known_pose(lamp_to_wall_m):
+    target, truth = known_target("dog", 128, lamp_to_wall_m)
     # The dog's own pose is left out of the starts: the search has to find it.
-    config = FitConfig(hands="1", size=128, quality="fast", seed=1, exclude_library=("dog",))
+    config = FitConfig(
+        hands="1", size=128, quality="fast", seed=1, exclude_library=("dog",), lamp_to_wall_m=lamp_to_wall_m
+    )
     result = fit_frame(target, config)
     assert result.score.success, result.score
+    assert result.posed.scene == truth.scene  # the lamp where it was asked for
     # The answer comes back: the hand casts its shadow where the true hand casts it.
     scene = result.posed.scene
     true_wrist = scene.project(torch.as_tensor(truth.hands[0].translation)[None])[0][0]
@@ -109,10 +116,14 @@ def test_bad_targets_fail_cleanly(tmp_path):
         (["--device", "tpu"], "unknown device"),
         (["--hand-model", "mano"], "--mano-dir"),
         (["--size", "4"], "--size"),
+        (["--lamp-distance", "9"], "lamp's distance from the wall must be 2 to 5 m"),
+        (["--lamp-distance", "nan"], "lamp's distance"),
+        (["--lamp-distance", "3", "--light", "directional"], "--lamp-distance needs a point light"),
+        (["bird", "--lamp-distance", "3"], "--lamp-distance works with one target"),
     ],
 )
 def test_bad_options_fail_cleanly(tmp_path, args, message):
-    res = _run(["fit", "dog", "--out", str(tmp_path / "o")] + args)
+    res = _run(["fit", "dog"] + args + ["--out", str(tmp_path / "o")])
     assert res.returncode == 2 and message in res.stderr and res.stderr.count("\n") == 1, res.stderr
     assert not (tmp_path / "o").exists()
 

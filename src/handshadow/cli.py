@@ -100,7 +100,8 @@ MAX_TARGETS = 2  # fit.MAX_VIEWS, checked here before torch loads
 
 def check_views(args: argparse.Namespace) -> None:
     """One-line errors for view options that cannot work: too many targets, --view-angle or
-    --view-weights without a second target, an angle out of range, weights that do not fit."""
+    --view-weights without a second target, an angle out of range, weights that do not fit,
+    --lamp-distance with two targets."""
     from handshadow.scene import check_view_angle
 
     n = len(args.target)
@@ -110,6 +111,8 @@ def check_views(args: argparse.Namespace) -> None:
         option = "--view-angle" if args.view_angle is not None else "--view-weights"
         raise HandshadowError(f"{option} needs a second target: handshadow fit FRONT SIDE {option} ...")
     if n > 1:
+        if args.lamp_distance is not None:
+            raise HandshadowError("--lamp-distance works with one target; two views keep the default lamp distance")
         check_view_angle(args.view_angle if args.view_angle is not None else DEFAULT_VIEW_ANGLE)
         if args.view_weights is not None:
             weights = parse_weights(args.view_weights)
@@ -142,6 +145,7 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
     """A FitConfig from the fit options; ``resolve=False`` leaves the device as given (a batch
     resolves it on each worker)."""
     from handshadow.fit import FitConfig
+    from handshadow.scene import check_lamp_distance
 
     if args.size < 32 or args.size > 2048:
         raise HandshadowError(f"--size must be between 32 and 2048 pixels, got {args.size}")
@@ -164,6 +168,11 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
         performers=args.performers,
         attempts=args.attempts,
     )
+    if args.lamp_distance is not None:
+        if args.light != "point":
+            raise HandshadowError("--lamp-distance needs a point light (a directional light has no lamp to move)")
+        check_lamp_distance(args.lamp_distance)
+        config = dataclasses.replace(config, lamp_to_wall_m=args.lamp_distance)
     if getattr(args, "view_angle", None) is not None:
         config = dataclasses.replace(config, view_angle_deg=args.view_angle)
     if getattr(args, "view_weights", None) is not None:
@@ -229,6 +238,13 @@ def _add_fit_options(
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")
     p.add_argument("--limits", default="anatomical", choices=["anatomical", "paper"], help="joint-limit preset")
     p.add_argument("--light", default="point", choices=["point", "directional"])
+    p.add_argument(
+        "--lamp-distance",
+        type=float,
+        metavar="M",
+        help="metres from the point lamp to the wall (default 2; 2 to 5: a farther lamp casts the same picture "
+        "with less perspective, from hands farther from the wall; one target only)",
+    )
     p.add_argument("--no-forearm", action="store_true", help="hands without forearms")
     p.add_argument(
         "--performers",

@@ -28,7 +28,7 @@ from handshadow.hands.posed import PosedMesh, cast_shadows
 from handshadow.metrics import FitScore, Part, ViewScores, iou, score, thin_parts, uncovered_parts
 from handshadow.posefile import parse_pose
 from handshadow.poses import PoseBatch, PosedScene
-from handshadow.scene import Scene, check_view_angle, default_views
+from handshadow.scene import LAMP_TO_WALL_M, Scene, check_view_angle, default_views
 from handshadow.search import (
     Interrupted,
     Problem,
@@ -88,7 +88,8 @@ class FitConfig:
     view_angle_deg turns view 1's lamp, wall and frame about the vertical axis through the
     hands' working volume (scene.Scene.turned); view_weights weighs the views (None: equally).
     attempts: fresh starts (seed, seed + 1, ...) while the result fails the success test, the
-    best kept (None: ATTEMPTS of the quality)."""
+    best kept (None: ATTEMPTS of the quality). lamp_to_wall_m: the point lamp's distance from
+    the wall (scene.LAMP_TO_WALL_RANGE_M; one view only); the frame on the wall keeps its size."""
 
     hands: str = "auto"
     size: int = 256
@@ -108,6 +109,7 @@ class FitConfig:
     view_angle_deg: float = 90.0
     view_weights: tuple[float, ...] | None = None
     attempts: int | None = None
+    lamp_to_wall_m: float = LAMP_TO_WALL_M
 
 
 @dataclasses.dataclass
@@ -367,7 +369,8 @@ def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
     """The scene of each target (H, W): view 0 is Scene.default; view 1 the same turned by
     config.view_angle_deg about the vertical axis through the hands' working volume. Raises
     HandshadowError for more than MAX_VIEWS targets, targets of different sizes, an angle out
-    of range (scene.check_view_angle) or view weights that do not fit."""
+    of range (scene.check_view_angle), view weights that do not fit, or a lamp distance out of
+    range or with two views."""
     if not 1 <= len(targets) <= MAX_VIEWS:
         raise HandshadowError(f"one pose can answer 1 to {MAX_VIEWS} targets, got {len(targets)}")
     if len({t.shape for t in targets}) > 1:
@@ -378,7 +381,8 @@ def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
     height, width = targets[0].shape
     if len(targets) > 1:
         check_view_angle(config.view_angle_deg)
-    return default_views(width, height, config.light, (0.0, config.view_angle_deg)[: len(targets)])
+    angles = (0.0, config.view_angle_deg)[: len(targets)]
+    return default_views(width, height, config.light, angles, config.lamp_to_wall_m)
 
 
 def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: float | None) -> tuple[PoseBatch, bool]:

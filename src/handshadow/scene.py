@@ -38,6 +38,11 @@ if TYPE_CHECKING:
 
 LightType = Literal["point", "directional"]
 LAMP_TO_WALL_M = 2.0
+# The lamp's distance from the wall a user may choose (Scene.default's lamp_to_wall_m), metres:
+# from the default out to a long room's length. A farther lamp casts the same picture from
+# hands farther from the wall, with less perspective (a forearm behind its hand is magnified
+# less than it, docs/performing.md).
+LAMP_TO_WALL_RANGE_M = (LAMP_TO_WALL_M, 5.0)
 FRAME_HEIGHT_M = {"point": 0.8, "directional": 0.4}  # a hand's shadow fills about half of it
 # Where hands belong, as distances in front of the wall (Scene.placement_range):
 WALL_CLEARANCE_M = 0.03  # the nearest a hand comes to the wall while the search runs
@@ -99,15 +104,19 @@ class Scene:
 
     # -- construction -------------------------------------------------------------------
     @staticmethod
-    def default(width: int = 256, height: int = 256, light: LightType = "point") -> Scene:
-        """A lamp 2 m in front of a wall, the image frame centred on the wall."""
+    def default(
+        width: int = 256, height: int = 256, light: LightType = "point", lamp_to_wall_m: float = LAMP_TO_WALL_M
+    ) -> Scene:
+        """A lamp ``lamp_to_wall_m`` (default 2 m, within LAMP_TO_WALL_RANGE_M) in front of a
+        wall, the image frame centred on the wall; the frame's size does not depend on it."""
+        check_lamp_distance(lamp_to_wall_m)
         if light not in ("point", "directional"):
             raise SceneError(f"light must be 'point' or 'directional', got {light!r}")
         if width < 1 or height < 1:
             raise SceneError(f"image size must be positive, got {width} x {height}")
         h_m = FRAME_HEIGHT_M[light]
         w_m = h_m * width / height
-        lamp = (0.0, 0.0, LAMP_TO_WALL_M)
+        lamp = (0.0, 0.0, float(lamp_to_wall_m))
         return Scene(
             light=Light("point", position=lamp)
             if light == "point"
@@ -163,10 +172,18 @@ class Scene:
 
     def placement_range(self) -> tuple[float, float]:
         """Distances from the wall (metres, along its normal) where the search keeps the hands:
-        off the wall by WALL_CLEARANCE_M, LAMP_CLEARANCE_M short of a point light, and at most
-        FARTHEST_M out. Inside :meth:`light_depth_range`, which is the physical bound."""
+        off the wall by WALL_CLEARANCE_M, and LAMP_CLEARANCE_M short of a point light or at most
+        FARTHEST_M out under a directional one. Inside :meth:`light_depth_range`, which is the
+        physical bound."""
         _, hi = self.light_depth_range()
-        return WALL_CLEARANCE_M, min(hi - LAMP_CLEARANCE_M, FARTHEST_M) if math.isfinite(hi) else FARTHEST_M
+        return WALL_CLEARANCE_M, hi - LAMP_CLEARANCE_M if math.isfinite(hi) else FARTHEST_M
+
+    def working_depth(self) -> float:
+        """Distance from the wall (metres) where a hand's shadow is about twice its size, which
+        fills about half the frame: halfway to a point light (1 m under the default lamp), 1 m
+        under a directional one (whose frame is half as high). Starts are placed there."""
+        _, hi = self.light_depth_range()
+        return hi / 2 if math.isfinite(hi) else 1.0
 
     def projection_matrix(self) -> np.ndarray:
         """(4, 4) matrix M mapping a world point p to (x', y', w', h) = M [p, 1], with the pixel
@@ -303,12 +320,26 @@ def check_view_angle(angle_deg: float) -> None:
 
 
 def default_views(
-    width: int, height: int, light: LightType = "point", angles_deg: tuple[float, ...] = (0.0,)
+    width: int,
+    height: int,
+    light: LightType = "point",
+    angles_deg: tuple[float, ...] = (0.0,),
+    lamp_to_wall_m: float = LAMP_TO_WALL_M,
 ) -> list[Scene]:
     """One default scene per view: view k is :meth:`Scene.default` turned by angles_deg[k]
-    (0 for view 0) about the vertical axis through VIEW_AXIS_POINT_M."""
-    base = Scene.default(width, height, light=light)
+    (0 for view 0) about the vertical axis through VIEW_AXIS_POINT_M. Several views need the
+    default lamp distance (the turns are laid out for it); SceneError otherwise."""
+    if len(angles_deg) > 1 and lamp_to_wall_m != LAMP_TO_WALL_M:
+        raise SceneError(f"two views need the default lamp distance ({LAMP_TO_WALL_M:g} m), got {lamp_to_wall_m:g} m")
+    base = Scene.default(width, height, light=light, lamp_to_wall_m=lamp_to_wall_m)
     return [base if a == 0 else base.turned(a) for a in angles_deg]
+
+
+def check_lamp_distance(metres: float) -> None:
+    """SceneError unless the lamp's distance from the wall lies in LAMP_TO_WALL_RANGE_M."""
+    lo, hi = LAMP_TO_WALL_RANGE_M
+    if not lo <= metres <= hi:  # also refuses NaN
+        raise SceneError(f"the lamp's distance from the wall must be {lo:g} to {hi:g} m, got {metres:g}")
 
 
 def views_to_json(views: list[Scene], meshes: list[str] | None = None) -> dict | list[dict]:

@@ -23,7 +23,7 @@ from handshadow.hands.rig import FINGERS
 from handshadow.library import library_names, load_library_pose
 from handshadow.metrics import iou
 from handshadow.poses import HandPose, HandPoseBatch, Origin, PoseBatch
-from handshadow.search.atlas import Atlas, shape_descriptor
+from handshadow.search.atlas import WRIST_DEPTH_M, Atlas, shape_descriptor
 
 log = logging.getLogger(__name__)
 MIRROR = torch.diag(torch.tensor([-1.0, 1.0, 1.0]))
@@ -296,7 +296,7 @@ def choose_starts(
 
     problem: a search.problem.Problem; returns a PoseBatch on its device, with origins."""
 
-    randoms = random_starts(RANDOM_OVERSAMPLE * n_random, sides, problem.limits, rng)
+    randoms = random_starts(RANDOM_OVERSAMPLE * n_random, sides, problem.limits, rng, problem.scene.working_depth())
     held = problem.holdable(randoms)
     randoms = randoms.select(sorted(range(randoms.batch), key=lambda i: not held[i])[:n_random])
     parts = [library_starts(len(sides), sides, exclude=exclude), randoms]
@@ -369,7 +369,8 @@ def atlas_starts(atlas: Atlas, target: torch.Tensor, sides: list[str], scene) ->
         return _no_starts(sides)  # a frame of another shape than the atlas's
     first_side = sides[0]
     nearest = atlas.nearest(shape_descriptor(target[None])[0].numpy(), ATLAS_ONE if len(sides) == 1 else ATLAS_FIRST)
-    first = _atlas_hands(atlas, nearest, first_side)
+    depth = scene.working_depth()
+    first = _atlas_hands(atlas, nearest, first_side, depth)
     if len(sides) == 1:
         return PoseBatch([first], [Origin("atlas", str(i)) for i in nearest])
     pivot = pivot_pixel(scene, target.shape[0])
@@ -386,7 +387,7 @@ def atlas_starts(atlas: Atlas, target: torch.Tensor, sides: list[str], scene) ->
         second_masks = _atlas_masks(atlas, second_idx, sides[1])
         a2, s2, t2, _ = similarity_align(second_masks, rest, pivot, ALIGN_ANGLES_DEG, ALIGN_SCALES)
         second = apply_similarity(
-            PoseBatch([_atlas_hands(atlas, second_idx, sides[1])]), a2, s2, t2, scene, target.shape[0]
+            PoseBatch([_atlas_hands(atlas, second_idx, sides[1], depth)]), a2, s2, t2, scene, target.shape[0]
         )
         rights.append(placed.hands[0].select([k] * len(second_idx)))
         lefts.append(second.hands[0].moved(torch.tensor([0.0, 0.0, -PAIR_DEPTH_OFFSET_M])))
@@ -399,10 +400,11 @@ def _no_starts(sides) -> PoseBatch:
     return PoseBatch([empty for _ in sides], [])
 
 
-def _atlas_hands(atlas: Atlas, idx: np.ndarray, side: str) -> HandPoseBatch:
+def _atlas_hands(atlas: Atlas, idx: np.ndarray, side: str, depth_m: float) -> HandPoseBatch:
     """Entries idx as the given side's hand (the atlas holds right hands; a left one is the
-    mirror image)."""
-    hands = atlas.poses.select(torch.as_tensor(idx))
+    mirror image), the wrist moved along the lamp's axis to depth_m from the wall (the scene's
+    working depth, where the shadow has the atlas's size)."""
+    hands = atlas.poses.select(torch.as_tensor(idx)).moved(torch.tensor([0.0, 0.0, depth_m - WRIST_DEPTH_M]))
     if side == "right":
         return hands
     m = MIRROR.to(hands.rotation.dtype)
