@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from handshadow.errors import HandshadowError
+from handshadow.scene import LAMP_TO_WALL_M, LAMP_TO_WALL_RANGE_M
 
 MAX_UPLOAD = "8mb"
 QUALITY_HELP = "fast: about 20 s; default: about a minute; best: a few minutes (on a laptop CPU)"
@@ -141,6 +142,7 @@ class FitOptions:
     size: int = 256
     invert: bool = False
     view_angle: float = 90.0  # degrees between the two lamps when a second shadow is asked for
+    lamp_distance: float = LAMP_TO_WALL_M  # metres from the point lamp to the wall (one shadow only)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -260,6 +262,7 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
         size=options.size,
         device="auto",
         view_angle_deg=options.view_angle,
+        lamp_to_wall_m=options.lamp_distance,
     )
 
     def work(report, stop):
@@ -384,6 +387,7 @@ class ShadowTab:
     quality: object
     limits: object
     light: object
+    lamp_distance: object
     size: object
     invert: object
     fit: object
@@ -399,7 +403,16 @@ class ShadowTab:
     finished: object
 
     def options(self) -> list:
-        return [self.hands, self.quality, self.limits, self.light, self.size, self.invert, self.view_angle]
+        return [
+            self.hands,
+            self.quality,
+            self.limits,
+            self.light,
+            self.lamp_distance,
+            self.size,
+            self.invert,
+            self.view_angle,
+        ]
 
     def second(self) -> list:
         return [self.second_source, self.second_upload, self.second_example]
@@ -471,6 +484,15 @@ def _fit_options(gr) -> dict:
                 value="point",
                 label="Light",
                 info="point: a lamp 2 m from the wall; directional: sunlight",
+            ),
+            "lamp_distance": gr.Slider(
+                LAMP_TO_WALL_RANGE_M[0],
+                LAMP_TO_WALL_RANGE_M[1],
+                value=LAMP_TO_WALL_M,
+                step=0.5,
+                label="Lamp distance (m)",
+                info="a point lamp farther from the wall: the same picture, less perspective (one shadow only)",
+                elem_id="lamp-distance",
             ),
             "invert": gr.Checkbox(value=False, label="Invert: the shape is lighter than its ground", elem_id="invert"),
         }
@@ -633,7 +655,7 @@ def build_app(store: SessionStore | None = None):
         return read_for_page(chosen(source, upload, example), invert, int(size))
 
     def on_fit(source, upload, drawing, example, second_source, second_upload, second_example, hands, quality,
-               limits, light, size, invert, view_angle, request: gr.Request,
+               limits, light, lamp_distance, size, invert, view_angle, request: gr.Request,
                progress=gr.Progress()):  # noqa: B008  # fmt: skip
         session = session_of(request)
         options = FitOptions(
@@ -641,6 +663,7 @@ def build_app(store: SessionStore | None = None):
             quality=quality,
             limits=limits,
             light=light,
+            lamp_distance=float(lamp_distance),
             size=int(size),
             invert=bool(invert),
             view_angle=float(view_angle),
