@@ -39,7 +39,7 @@ from scipy import ndimage
 from handshadow.batch import find_targets, run_batch
 from handshadow.fit import FitConfig
 from handshadow.hands.penetration import TOLERANCE_MM as PENETRATION_TOLERANCE_MM
-from handshadow.scene import LAMP_TO_WALL_M
+from handshadow.scene import FIT_LAMP_TO_WALL_M
 
 #: Columns of the table; every other measure of the fit is printed after them as key=value.
 TABLE = {"iou": "IoU", "boundary_f1": "F1@2", "hd95": "HD95", "thin_recall": "thin"}
@@ -66,7 +66,7 @@ def main() -> None:
     parser.add_argument(
         "--lamp-distance",
         type=float,
-        default=LAMP_TO_WALL_M,
+        default=None,
         help="metres from lamp to wall (handshadow fit --lamp-distance)",
     )
     parser.add_argument("--workers", type=int, default=1, help="local Dask workers, each fitting one target at a time")
@@ -90,7 +90,7 @@ def main() -> None:
     where = args.scheduler or f"{args.workers} workers x {threads} torch threads"
     print(
         f"{len(targets)} targets, hands={args.hands}, size={args.size}, quality={args.quality}, device={args.device},"
-        f" forearms={'no' if args.no_forearm else 'yes'}, lamp {args.lamp_distance:g} m, {where}"
+        f" forearms={'no' if args.no_forearm else 'yes'}, lamp {args.lamp_distance or FIT_LAMP_TO_WALL_M:g} m, {where}"
     )
     print(
         f"{'target':24s} {'IoU':>6s} {'F1@2':>6s} {'HD95':>6s} {'thin':>6s} {'pen':>5s} {'perf':>4s} {'shadow':>6s}"

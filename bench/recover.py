@@ -31,10 +31,10 @@ from handshadow.hands.limits import joint_limits_deg, wrist_limits_deg
 from handshadow.hands.penetration import penetration
 from handshadow.hands.posed import cast_shadow
 from handshadow.poses import HandPose, PosedScene
-from handshadow.scene import Scene
+from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, Scene
 
 SIZE = 256
-DEPTH_M = (0.85, 1.25)  # wrist distance from the lamp
+DEPTH_M = (0.85, 1.25)  # wrist distance from a lamp 2 m from the wall (scaled with the fit's lamp)
 ARM_CONE_DEG = 70.0  # forearms within this angle of the ray back toward the lamp
 MAX_WRIST_GAP_M = 0.3
 AREA_SHARE = (0.04, 0.45)  # the shadow's share of the frame
@@ -78,10 +78,10 @@ def _turn_z_to(axis: np.ndarray) -> np.ndarray:
 
 def random_target(rng: np.random.Generator, forearm: bool, tries: int = 200) -> tuple[PosedScene, np.ndarray]:
     """A performable two-hand pose whose shadow lies well inside the frame, and the shadow."""
-    scene = Scene.default(SIZE, SIZE)
+    scene = Scene.default(SIZE, SIZE, lamp_to_wall_m=FIT_LAMP_TO_WALL_M)  # the lamp a default fit uses
     lamp = np.asarray(scene.light.position)
     for _ in range(tries):
-        depth = rng.uniform(*DEPTH_M)
+        depth = rng.uniform(*DEPTH_M) * FIT_LAMP_TO_WALL_M / LAMP_TO_WALL_M  # the same sizes of shadow
         middle = lamp + np.array([rng.normal(0, 0.04), rng.normal(0, 0.04), -depth])
         offset = rng.normal(0, 1, 3) * np.array([1.0, 0.6, 0.3])
         offset *= rng.uniform(0.06, MAX_WRIST_GAP_M / 2) / np.linalg.norm(offset)

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from handshadow.errors import HandshadowError
-from handshadow.scene import LAMP_TO_WALL_M, LAMP_TO_WALL_RANGE_M
+from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, LAMP_TO_WALL_RANGE_M
 
 MAX_UPLOAD = "8mb"
 QUALITY_HELP = "fast: about 20 s; default: about a minute; best: a few minutes (on a laptop CPU)"
@@ -142,7 +142,7 @@ class FitOptions:
     size: int = 256
     invert: bool = False
     view_angle: float = 90.0  # degrees between the two lamps when a second shadow is asked for
-    lamp_distance: float = LAMP_TO_WALL_M  # metres from the point lamp to the wall (one shadow only)
+    lamp_distance: float = FIT_LAMP_TO_WALL_M  # metres from the point lamp to the wall (one shadow only)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -262,7 +262,7 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
         size=options.size,
         device="auto",
         view_angle_deg=options.view_angle,
-        lamp_to_wall_m=options.lamp_distance,
+        lamp_to_wall_m=options.lamp_distance if len(sources) == 1 else None,  # two shadows: the default
     )
 
     def work(report, stop):
@@ -483,15 +483,16 @@ def _fit_options(gr) -> dict:
                 ["point", "directional"],
                 value="point",
                 label="Light",
-                info="point: a lamp 2 m from the wall; directional: sunlight",
+                info="point: a lamp (its distance below); directional: sunlight",
             ),
             "lamp_distance": gr.Slider(
                 LAMP_TO_WALL_RANGE_M[0],
                 LAMP_TO_WALL_RANGE_M[1],
-                value=LAMP_TO_WALL_M,
+                value=FIT_LAMP_TO_WALL_M,
                 step=0.5,
                 label="Lamp distance (m)",
-                info="a point lamp farther from the wall: the same picture, less perspective (one shadow only)",
+                info="a point lamp farther from the wall: the same picture, less perspective"
+                f" (one shadow; two shadows keep {LAMP_TO_WALL_M:g} m)",
                 elem_id="lamp-distance",
             ),
             "invert": gr.Checkbox(value=False, label="Invert: the shape is lighter than its ground", elem_id="invert"),

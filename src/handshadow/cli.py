@@ -242,8 +242,8 @@ def _add_fit_options(
         "--lamp-distance",
         type=float,
         metavar="M",
-        help="metres from the point lamp to the wall (default 2; 2 to 5: a farther lamp casts the same picture "
-        "with less perspective, from hands farther from the wall; one target only)",
+        help="metres from the point lamp to the wall (default 4 with one target, 2 with two; 2 to 5: a farther "
+        "lamp casts the same picture with less perspective, from hands farther from the wall; one target only)",
     )
     p.add_argument("--no-forearm", action="store_true", help="hands without forearms")
     p.add_argument(

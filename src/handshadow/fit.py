@@ -28,7 +28,7 @@ from handshadow.hands.posed import PosedMesh, cast_shadows
 from handshadow.metrics import FitScore, Part, ViewScores, iou, score, thin_parts, uncovered_parts
 from handshadow.posefile import parse_pose
 from handshadow.poses import PoseBatch, PosedScene
-from handshadow.scene import LAMP_TO_WALL_M, Scene, check_view_angle, default_views
+from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, Scene, check_view_angle, default_views
 from handshadow.search import (
     Interrupted,
     Problem,
@@ -89,7 +89,8 @@ class FitConfig:
     hands' working volume (scene.Scene.turned); view_weights weighs the views (None: equally).
     attempts: fresh starts (seed, seed + 1, ...) while the result fails the success test, the
     best kept (None: ATTEMPTS of the quality). lamp_to_wall_m: the point lamp's distance from
-    the wall (scene.LAMP_TO_WALL_RANGE_M; one view only); the frame on the wall keeps its size."""
+    the wall (scene.LAMP_TO_WALL_RANGE_M; one view only; None: scene.FIT_LAMP_TO_WALL_M for one
+    view, scene.LAMP_TO_WALL_M for two); the frame on the wall keeps its size."""
 
     hands: str = "auto"
     size: int = 256
@@ -109,7 +110,7 @@ class FitConfig:
     view_angle_deg: float = 90.0
     view_weights: tuple[float, ...] | None = None
     attempts: int | None = None
-    lamp_to_wall_m: float = LAMP_TO_WALL_M
+    lamp_to_wall_m: float | None = None
 
 
 @dataclasses.dataclass
@@ -382,7 +383,10 @@ def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
     if len(targets) > 1:
         check_view_angle(config.view_angle_deg)
     angles = (0.0, config.view_angle_deg)[: len(targets)]
-    return default_views(width, height, config.light, angles, config.lamp_to_wall_m)
+    lamp = config.lamp_to_wall_m
+    if lamp is None:
+        lamp = FIT_LAMP_TO_WALL_M if len(targets) == 1 else LAMP_TO_WALL_M
+    return default_views(width, height, config.light, angles, lamp)
 
 
 def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: float | None) -> tuple[PoseBatch, bool]:

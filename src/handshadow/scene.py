@@ -43,6 +43,10 @@ LAMP_TO_WALL_M = 2.0
 # hands farther from the wall, with less perspective (a forearm behind its hand is magnified
 # less than it, docs/performing.md).
 LAMP_TO_WALL_RANGE_M = (LAMP_TO_WALL_M, 5.0)
+# A fit's lamp unless told otherwise (one view; two views keep LAMP_TO_WALL_M): a forearm
+# 28 cm behind its hand is magnified 1.16 times the hand's scale here, 1.39 times at 2 m, so
+# it hides behind the hand far better (README, "Lamp distance": 16 HSP targets, 10 against 8).
+FIT_LAMP_TO_WALL_M = 4.0
 FRAME_HEIGHT_M = {"point": 0.8, "directional": 0.4}  # a hand's shadow fills about half of it
 # Where hands belong, as distances in front of the wall (Scene.placement_range):
 WALL_CLEARANCE_M = 0.03  # the nearest a hand comes to the wall while the search runs
