@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from handshadow.fit import FitConfig, fit_frame, make_problem
+from handshadow.fit import CONTACTS_EVERY, FitConfig, fit_frame, make_problem, schedule
 from handshadow.hands.limits import JointLimits
 from handshadow.metrics import rank_key, score
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
@@ -383,3 +383,16 @@ def test_a_stop_in_a_later_attempt_keeps_the_best_so_far(monkeypatch):
     assert result.interrupted and result.posed.fit["interrupted"] is True and result.posed.fit["attempts_run"] == 2
     better = min(range(2), key=lambda k: fit_module.result_key(attempts[k]))
     assert result.score == attempts[better].score and np.array_equal(result.shadow, attempts[better].shadow)
+
+
+@pytest.mark.parametrize("quality", ["fast", "default", "best"])
+def test_only_the_stages_made_for_full_resolution_run_the_exact_mesh_test(quality):
+    # A 64-pixel frame brings every stage to full resolution; the coarse stages' many
+    # hypotheses still go without the slow exact test (it made the app's small fits twice as slow).
+    big = schedule(quality, None, 256)[2]
+    small = schedule(quality, None, 64)[2]
+    assert all(st.height == 64 for st in small)
+    assert [st.contacts_every for st in small] == [st.contacts_every for st in big]
+    assert big[0].contacts_every == 0 and big[-1].contacts_every == CONTACTS_EVERY > 0
+    two_views = schedule(quality, None, 64, views=2)[2]
+    assert two_views[-1].contacts_every == CONTACTS_EVERY
