@@ -266,16 +266,19 @@ def test_bad_inputs_and_options_fail_cleanly(tmp_path, args, message):
 
 
 def _worker_environ() -> dict:
-    return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS")}
+    from distributed import get_worker
+
+    profiling = "profile" in get_worker().periodic_callbacks  # the stack sampler
+    return {**{k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS")}, "profiling": profiling}
 
 
-def test_local_workers_keep_glibcs_dynamic_mmap_threshold():
+def test_local_workers_keep_glibcs_dynamic_mmap_threshold_and_do_not_profile():
     # Dask starts its workers with MALLOC_TRIM_THRESHOLD_ set, which turns glibc's dynamic mmap
     # threshold off: a fit ran 1.3 times slower in such a worker. The local cluster leaves it out
-    # and keeps the rest of Dask's worker environment.
+    # and keeps the rest of Dask's worker environment; without a dashboard, no stack sampler.
     from handshadow.batch import open_cluster
 
     assert "MALLOC_TRIM_THRESHOLD_" not in os.environ
     with open_cluster(None, 1, 1, dashboard=False, quiet_logs=True) as (client, _):
         environ = client.submit(_worker_environ, pure=False).result()
-    assert environ == {"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}
+    assert environ == {"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1", "profiling": False}
