@@ -386,13 +386,14 @@ def test_a_stop_in_a_later_attempt_keeps_the_best_so_far(monkeypatch):
 
 
 @pytest.mark.parametrize("quality", ["fast", "default", "best"])
-def test_only_the_stages_made_for_full_resolution_run_the_exact_mesh_test(quality):
-    # A 64-pixel frame brings every stage to full resolution; the coarse stages' many
-    # hypotheses still go without the slow exact test (it made the app's small fits twice as slow).
+def test_the_first_stage_never_runs_the_exact_mesh_test(quality):
+    # A 64-pixel frame brings every stage to full resolution; the first stage's many
+    # hypotheses (a broad search) still go without the slow exact test (it made the app's
+    # small fits twice as slow), and the later stages keep it as at any size.
     big = schedule(quality, None, 256)[2]
     small = schedule(quality, None, 64)[2]
     assert all(st.height == 64 for st in small)
-    assert [st.contacts_every for st in small] == [st.contacts_every for st in big]
+    assert [st.contacts_every for st in small] == [0] + [CONTACTS_EVERY] * (len(small) - 1)
     assert big[0].contacts_every == 0 and big[-1].contacts_every == CONTACTS_EVERY > 0
     two_views = schedule(quality, None, 64, views=2)[2]
-    assert two_views[-1].contacts_every == CONTACTS_EVERY
+    assert two_views[0].contacts_every == 0 and two_views[-1].contacts_every == CONTACTS_EVERY

@@ -12,7 +12,6 @@ result.views     # per view (ViewFit): its scene, target, shadow, measures, miss
 from __future__ import annotations
 
 import dataclasses
-import functools
 import logging
 import time
 from collections.abc import Callable, Sequence
@@ -210,14 +209,13 @@ def schedule(
         GPU a batch of a thousand hypotheses costs about what one does, so it keeps CUDA_WIDER
         times the starts and CUDA_WIDER / 4 times the survivors of every stage but the last. With
         several views a last exact stage (VIEWS_SETTLE) settles the pose in all of them. The stages
-    made for full resolution (the last one or two, and VIEWS_SETTLE) push out the exact mesh
-    contacts (CONTACTS_EVERY); a small frame (64 px) brings the coarse stages to full resolution
-    too, but their many hypotheses go without the slow exact test. After every stage but
+    at full resolution push out the exact mesh contacts (CONTACTS_EVERY), all but the first: a
+    small frame (64 px) brings the first stage to full resolution too, and its many
+    hypotheses, a broad search, go without the slow exact test. After every stage but
     the last, hands inside each other pass one in front of the other (Stage.layer)."""
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
     s = Stage
-    full = functools.partial(Stage, height=size, contacts_every=CONTACTS_EVERY)  # made for full resolution
     n_random, n_keep, stages = {
         "fast": (
             24,
@@ -225,7 +223,7 @@ def schedule(
             [
                 s(height=64, blur_px=6, attract_px=12, steps=60, keep=3, lr_scale=1.0, skeleton=1.0),
                 s(height=128, blur_px=2, attract_px=6, steps=50, keep=1, lr_scale=0.7, skeleton=0.3),
-                full(blur_px=0, attract_px=3, steps=40, keep=1, lr_scale=0.4, skeleton=0.05),
+                s(height=size, blur_px=0, attract_px=3, steps=40, keep=1, lr_scale=0.4, skeleton=0.05),
             ],
         ),
         "default": (
@@ -234,8 +232,8 @@ def schedule(
             [
                 s(height=64, blur_px=8, attract_px=16, steps=160, keep=8, lr_scale=1.0, skeleton=1.0),
                 s(height=128, blur_px=3, attract_px=8, steps=120, keep=4, lr_scale=0.7, skeleton=0.3),
-                full(blur_px=1, attract_px=4, steps=160, keep=3, lr_scale=0.4, skeleton=0.05),
-                full(blur_px=0, attract_px=2, steps=100, keep=1, lr_scale=0.15, skeleton=0.0),
+                s(height=size, blur_px=1, attract_px=4, steps=160, keep=3, lr_scale=0.4, skeleton=0.05),
+                s(height=size, blur_px=0, attract_px=2, steps=100, keep=1, lr_scale=0.15, skeleton=0.0),
             ],
         ),
         "best": (
@@ -244,8 +242,8 @@ def schedule(
             [
                 s(height=64, blur_px=8, attract_px=16, steps=240, keep=12, lr_scale=1.0, skeleton=1.0),
                 s(height=128, blur_px=3, attract_px=8, steps=160, keep=4, lr_scale=0.7, skeleton=0.3),
-                full(blur_px=1, attract_px=4, steps=220, keep=3, lr_scale=0.4, skeleton=0.05),
-                full(blur_px=0, attract_px=2, steps=140, keep=1, lr_scale=0.15, skeleton=0.0),
+                s(height=size, blur_px=1, attract_px=4, steps=220, keep=3, lr_scale=0.4, skeleton=0.05),
+                s(height=size, blur_px=0, attract_px=2, steps=140, keep=1, lr_scale=0.15, skeleton=0.0),
             ],
         ),
     }[quality]
@@ -254,8 +252,11 @@ def schedule(
         n_random, n_keep = n_random * CUDA_WIDER, n_keep * CUDA_WIDER
         stages = [dataclasses.replace(st, keep=st.keep * CUDA_WIDER // 4) for st in stages[:-1]] + stages[-1:]
     if views > 1:
-        settle = dataclasses.replace(VIEWS_SETTLE, height=size, steps=VIEWS_SETTLE_STEPS[quality])
-        stages = [*stages, dataclasses.replace(settle, contacts_every=CONTACTS_EVERY)]
+        stages = [*stages, dataclasses.replace(VIEWS_SETTLE, height=size, steps=VIEWS_SETTLE_STEPS[quality])]
+    stages = [
+        dataclasses.replace(st, contacts_every=CONTACTS_EVERY) if st.height == size and i > 0 else st
+        for i, st in enumerate(stages)
+    ]
     stages = [dataclasses.replace(st, layer=True) for st in stages[:-1]] + stages[-1:]
     if iters is not None:
         total = sum(st.steps for st in stages)
