@@ -20,6 +20,8 @@ import urllib.request
 
 from playwright.sync_api import sync_playwright
 
+from handshadow.app import DEFAULT_QUALITY
+
 FLAGS = [
     "--headless",
     "--no-sandbox",
@@ -66,7 +68,7 @@ def main() -> None:
                 page.wait_for_selector("#fit")
                 page.locator("#example input").fill(args.example)
                 page.keyboard.press("Enter")
-                if args.quality != "fast" or args.size != "256":
+                if args.quality != DEFAULT_QUALITY or args.size != "256":  # not the page's own choice
                     page.get_by_text("Options").click()
                     page.locator("#quality").get_by_label(args.quality, exact=True).check()
                     page.locator("#size").get_by_label(args.size, exact=True).check()

@@ -120,12 +120,13 @@ def _choose(page, group_id: str, label: str) -> None:
     page.locator(f"#{group_id}").get_by_label(label, exact=True).check()
 
 
-def _options(page, hands: str, size: str = "64", quality: str | None = None) -> None:
+def _options(page, hands: str, size: str = "64", quality: str = "fast") -> None:
+    """Open Options and choose hands, detail and quality (fast by default here: the page's
+    own default is the command line's, minutes on these two cores)."""
     page.get_by_text("Options").click()
     _choose(page, "hands", hands)
     _choose(page, "size", size)
-    if quality:
-        _choose(page, "quality", quality)
+    _choose(page, "quality", quality)
 
 
 def _upload(page, path) -> None:
