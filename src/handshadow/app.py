@@ -350,9 +350,9 @@ def result_files(finished: dict) -> tuple[str, ...]:
     return (shadow, *(str(folder / n) for n in names), finished["zip"], str(folder / "progress.gif"))
 
 
-def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size: int):
-    """A morph for the page: (video, GIF, path plot, zip, status). Errors: Nones and the
-    message in words."""
+def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size: int, quality: str = DEFAULT_QUALITY):
+    """A morph for the page: (video, GIF, path plot, zip, status); both ends fitted at
+    ``quality``. Errors: Nones and the message in words."""
     from handshadow.examples import target_path
     from handshadow.fit import FitConfig
     from handshadow.pipeline import interpolate_to_folder
@@ -361,7 +361,7 @@ def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size:
     folder = session.new_job("morph")
     try:
         targets = [read_target(target_path(source), 64, 64) for source in (a, b)]
-        config = FitConfig(hands=hands, quality="fast", size=size, device="auto")
+        config = FitConfig(hands=hands, quality=quality, size=size, device="auto")
         result, report = interpolate_to_folder(a, b, folder / "result", config, frames=frames, show_progress=False)
     except HandshadowError as exc:
         return None, None, None, None, f"**Cannot morph:** {in_words(exc, a, b)}"
@@ -436,6 +436,7 @@ class MorphTab:
     frames: object
     hands: object
     size: object
+    quality: object
     morph: object
     status: object
     video: object
@@ -470,7 +471,11 @@ def _fit_options(gr) -> dict:
         return {
             "hands": gr.Radio(["1", "2", "auto"], value="auto", label="Hands", elem_id="hands"),
             "quality": gr.Radio(
-                ["fast", "default", "best"], value=DEFAULT_QUALITY, label="Quality", info=QUALITY_HELP, elem_id="quality"
+                ["fast", "default", "best"],
+                value=DEFAULT_QUALITY,
+                label="Quality",
+                info=QUALITY_HELP,
+                elem_id="quality",
             ),
             "size": gr.Radio(
                 SIZES,
@@ -597,8 +602,14 @@ def _morph_tab(gr, example_names: list[str]) -> MorphTab:
         frames = gr.Slider(8, 60, value=30, step=1, label="Frames", elem_id="frames")
         hands = gr.Radio(["1", "2"], value="2", label="Hands", elem_id="morph-hands")
         size = gr.Radio(SIZES, value="256", label="Detail (pixels)", elem_id="morph-size")
+        quality = gr.Radio(
+            ["fast", "default", "best"], value=DEFAULT_QUALITY, label="Quality of the ends", elem_id="morph-quality"
+        )
         morph = gr.Button("Morph", variant="primary", elem_id="morph")
-    status = gr.Markdown("Pick two shapes and press **Morph** (a few minutes).", elem_id="morph-status")
+    status = gr.Markdown(
+        "Pick two shapes and press **Morph** (several minutes: two fits and the path; fast ends take one or two).",
+        elem_id="morph-status",
+    )
     with gr.Row():
         video = gr.Video(label="Animation", elem_id="video")
         gif = gr.Image(label="Animation (GIF)", type="filepath", elem_id="morph-gif")
@@ -607,6 +618,7 @@ def _morph_tab(gr, example_names: list[str]) -> MorphTab:
         frames=frames,
         hands=hands,
         size=size,
+        quality=quality,
         morph=morph,
         status=status,
         video=video,
@@ -699,7 +711,7 @@ def build_app(store: SessionStore | None = None):
         session_of(request).cancel.set()
         return CANCELLING
 
-    def on_morph(source_a, example_a, upload_a, source_b, example_b, upload_b, frames, hands, size,
+    def on_morph(source_a, example_a, upload_a, source_b, example_b, upload_b, frames, hands, size, quality,
                  request: gr.Request, progress=gr.Progress()):  # noqa: B008  # fmt: skip
         session = session_of(request)
         try:
@@ -708,7 +720,7 @@ def build_app(store: SessionStore | None = None):
         except ValueError as exc:
             return None, None, None, None, f"**Nothing to morph:** {exc}"
         progress(0.05, desc="fitting both ends and the path")
-        return morph_steps(session, a, b, int(frames), hands, int(size))
+        return morph_steps(session, a, b, int(frames), hands, int(size), quality)
 
     with gr.Blocks(title="handshadow", analytics_enabled=False) as demo:
         shadow, morph = layout(gr, [name for name, _ in examples.list_targets()])
@@ -740,7 +752,7 @@ def build_app(store: SessionStore | None = None):
                           source, [example, upload], queue=False)  # fmt: skip
         morph.morph.click(
             on_morph,
-            [*morph.ends[0], *morph.ends[1], morph.frames, morph.hands, morph.size],
+            [*morph.ends[0], *morph.ends[1], morph.frames, morph.hands, morph.size, morph.quality],
             [morph.video, morph.gif, morph.path_plot, morph.zip_file, morph.status],
             concurrency_limit=1,
         )
