@@ -224,7 +224,8 @@ def _add_fit_options(
         "--quality",
         default=quality_default,
         choices=["fast", "default", "best"],
-        help=f"search effort (default: {quality_default})",
+        help=f"search effort (default: {quality_default}); on a 2-core CPU a two-hand fit takes about 15 s fast"
+        " (a rough look that seldom matches the shape), 1 to 3 min default, several minutes best",
     )
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     p.add_argument("--seed", type=int, default=0)
