@@ -244,6 +244,7 @@ def test_inputs_folders_globs_files_and_examples(tmp_path):
         (["dog", "--scheduler", "tcp://127.0.0.1:1", "--threads-per-worker", "2"], "sizes the local cluster"),
         (["dog", "--scheduler", "nowhere"], "cannot reach a Dask scheduler at nowhere"),
         (["dog", "--size", "8"], "--size must be between"),
+        (["dog", "--hops", "-1"], "--hops must be between 0 and 20"),
         pytest.param(
             ["dog", "--dashboard"],
             "--dashboard needs bokeh",

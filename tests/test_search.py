@@ -11,7 +11,7 @@ from handshadow.fit import CONTACTS_EVERY, FitConfig, fit_frame, make_problem, s
 from handshadow.hands.limits import JointLimits
 from handshadow.metrics import rank_key, score
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
-from handshadow.search import Interrupted, Stage, finishing, objective, polish, separate
+from handshadow.search import Hops, Interrupted, Stage, finishing, hop, objective, polish, separate
 from handshadow.search import stages as stages_module
 from tests.test_fit import known_target
 
@@ -397,3 +397,74 @@ def test_the_first_stage_never_runs_the_exact_mesh_test(quality):
     assert big[0].contacts_every == 0 and big[-1].contacts_every == CONTACTS_EVERY > 0
     two_views = schedule(quality, None, 64, views=2)[2]
     assert two_views[0].contacts_every == 0 and two_views[-1].contacts_every == CONTACTS_EVERY
+
+
+def _near_miss(truth):
+    """The dog pose 10 cm nearer the lamp with its fingers bent 1.6 times: a near miss."""
+    return PoseBatch(
+        [
+            HandPoseBatch(h.pose_rad * 1.6, h.rotation, h.translation + torch.tensor([0.0, 0.0, 0.1]), h.wrist_rad)
+            for h in truth.hands
+        ]
+    )
+
+
+def test_a_hop_turns_a_near_miss_into_a_success_and_leaves_others_alone():
+    problem, truth = _problem_and_truth()
+    near = _near_miss(truth)
+    start = problem.scores(near)[0]
+    assert start.near_miss
+    fine = [Stage(height=SIZE, blur_px=1, attract_px=4, steps=30, keep=2, lr_scale=0.4)]
+    fine.append(Stage(height=SIZE, blur_px=0, attract_px=2, steps=20, keep=1, lr_scale=0.15))
+    finished = []
+
+    def finish(poses):
+        finished.append(poses.batch)
+        return separate(problem, poses)
+
+    settings = Hops(copies=4)
+    out = hop(problem, near, fine, finish, rounds=2, settings=settings, generator=torch.Generator().manual_seed(0))
+    end = problem.scores(out)[0]
+    assert end.success and end.key() < start.key()
+    assert finished == [1]  # one hop, finished as a fit is; no second hop after a success
+    # A pose that is not a near miss (a success, or one far from the bar) comes back as it is.
+    assert hop(problem, truth, fine, finish, rounds=2, settings=settings) is truth
+    far = _moved(truth)
+    assert not problem.scores(far)[0].near_miss
+    assert hop(problem, far, fine, finish, rounds=2, settings=settings) is far
+    assert finished == [1]
+
+
+def test_a_stopped_hop_hands_back_the_pose_it_started_from():
+    problem, truth = _problem_and_truth()
+    near = _near_miss(truth)
+    fine = [Stage(height=SIZE, blur_px=1, attract_px=4, steps=30, keep=1, lr_scale=0.4)]
+    asked = []
+
+    def stop():
+        asked.append(1)
+        return len(asked) >= 3
+
+    with pytest.raises(Interrupted) as halt:
+        hop(problem, near, fine, lambda p: p, rounds=2, settings=Hops(copies=2), stop=stop)
+    assert halt.value.poses is near and len(asked) == 3
+
+
+def test_a_fit_hops_through_its_last_two_stages_as_its_quality_says(monkeypatch):
+    from handshadow import fit as fit_module
+
+    target, _ = known_target("dog", 64)
+    calls = []
+
+    def recording_hop(problem, poses, stages, finish, rounds, settings, generator, stop=None):
+        calls.append((rounds, stages))
+        return poses
+
+    monkeypatch.setattr(fit_module, "hop", recording_hop)
+    base = FitConfig(hands="1", size=64, quality="fast", iters=4, attempts=1)
+    fit_frame(target, base)
+    assert calls == []  # fast makes no hops
+    fit_frame(target, dataclasses.replace(base, hops=3))
+    _, _, stages = schedule("fast", 4, 64)
+    assert calls == [(3, stages[-2:])]
+    assert fit_module.HOPS["default"] >= 1

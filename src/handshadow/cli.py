@@ -153,6 +153,8 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
         raise HandshadowError(f"--iters must be positive, got {args.iters}")
     if args.attempts is not None and not 1 <= args.attempts <= 20:
         raise HandshadowError(f"--attempts must be between 1 and 20, got {args.attempts}")
+    if args.hops is not None and not 0 <= args.hops <= 20:
+        raise HandshadowError(f"--hops must be between 0 and 20, got {args.hops}")
     config = FitConfig(
         hands=args.hands,
         size=args.size,
@@ -167,6 +169,7 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
         quality=args.quality,
         performers=args.performers,
         attempts=args.attempts,
+        hops=args.hops,
     )
     if args.lamp_distance is not None:
         if args.light != "point":
@@ -234,6 +237,12 @@ def _add_fit_options(
         type=int,
         help="fresh starts (seed, seed+1, ...) while the result fails the success test, the best kept "
         "(default: 1 fast, 2 default, 3 best)",
+    )
+    p.add_argument(
+        "--hops",
+        type=int,
+        help="from a near miss (HD95 within 0.01 of its bar), each attempt's fine stages again from jittered "
+        "copies, the better kept; about 40 s each at 256 px (default: 0 fast, 2 default, 3 best)",
     )
     p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")

@@ -8,7 +8,8 @@
     starts.py     library poses and random hands, aligned to the target in 2D
     stages.py     run_stages(): coarse to fine, ranked and pruned after each stage
     finishing.py  separate(), polish(), keep_between_light_and_wall()
-    config.py     the numbers: Stage, Weights, LearningRates, Reach, Finishing
+    hops.py       hop(): a near miss's fine stages again from harder-jittered copies
+    config.py     the numbers: Stage, Weights, LearningRates, Reach, Finishing, Hops
 
 A hypothesis is one or two hands (poses.PoseBatch). Joint angles stay inside their limits by
 construction (poses.PoseParameters); rotations are a rotation vector applied in world axes on
@@ -16,14 +17,16 @@ top of the start's rotation; translations are metres. Ranking is by the fit meas
 (metrics.rank_key; with several views metrics.ViewScores: every view's together).
 """
 
-from handshadow.search.config import Finishing, LearningRates, Reach, Stage, Weights
+from handshadow.search.config import Finishing, Hops, LearningRates, Reach, Stage, Weights
 from handshadow.search.finishing import Interrupted, keep_between_light_and_wall, polish, separate
+from handshadow.search.hops import hop
 from handshadow.search.objective import LossTerms, objective, view_objective
 from handshadow.search.problem import Level, Problem, View, ViewTarget
 from handshadow.search.stages import Progress, SearchResult, run_stages
 
 __all__ = [
     "Finishing",
+    "Hops",
     "Interrupted",
     "LearningRates",
     "Level",
@@ -36,6 +39,7 @@ __all__ = [
     "View",
     "ViewTarget",
     "Weights",
+    "hop",
     "keep_between_light_and_wall",
     "objective",
     "polish",

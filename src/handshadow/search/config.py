@@ -140,3 +140,15 @@ class Finishing:
     def stage(self, height: int, steps: int) -> Stage:
         """Small exact-shadow steps at full resolution, without the skeleton guides."""
         return Stage(height=height, blur_px=0, attract_px=0, steps=steps, keep=1, lr_scale=self.lr_scale, skeleton=0.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Hops:
+    """A hop from a near miss (search.hops): ``copies`` copies of it, all but the first
+    jittered by ``jitter`` sigmas (joint logits, rotation vector in radians, translation in
+    metres: about three times the polish's, enough to leave its basin, little enough to keep
+    its shape), through the search's last ``stages`` stages again."""
+
+    copies: int = 8
+    jitter: tuple[float, float, float] = (0.5, 0.05, 0.01)
+    stages: int = 2
