@@ -4,7 +4,7 @@ success). It runs on `handshadow batch` (Dask), so it scales out with --workers 
 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
                         [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
-                        [--fits-only] [--no-forearm] [--lamp-distance M]
+                        [--fits-only] [--no-forearm] [--lamp-distance M] [--hops N]
 
 Prints one row per target as it finishes: the shadow's measures, the deepest penetration
 between or within the hands (pen, mm, exact on the meshes), whether the pose can be held
@@ -69,6 +69,7 @@ def main() -> None:
         default=None,
         help="metres from lamp to wall (handshadow fit --lamp-distance)",
     )
+    parser.add_argument("--hops", type=int, default=None, help="hops from a near miss (handshadow fit --hops)")
     parser.add_argument("--workers", type=int, default=1, help="local Dask workers, each fitting one target at a time")
     parser.add_argument("--threads-per-worker", type=int, help="torch threads per worker (default: cores / workers)")
     parser.add_argument("--scheduler", help="an existing Dask cluster instead of a local one")
@@ -104,6 +105,7 @@ def main() -> None:
         device=args.device,
         forearm=not args.no_forearm,
         lamp_to_wall_m=args.lamp_distance,
+        hops=args.hops,
     )
     if args.fits_only:
         fits_only(targets, config, args.workers, threads)
