@@ -448,6 +448,14 @@ def test_a_stopped_hop_hands_back_the_pose_it_started_from():
     with pytest.raises(Interrupted) as halt:
         hop(problem, near, fine, lambda p: p, rounds=2, settings=Hops(copies=2), stop=stop)
     assert halt.value.poses is near and len(asked) == 3
+    # Ctrl-C while the hop's result is being finished (separated, polished): the start again.
+
+    def ctrl_c(poses):
+        raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted) as halt:
+        hop(problem, near, [dataclasses.replace(fine[0], steps=2)], ctrl_c, rounds=2, settings=Hops(copies=2))
+    assert halt.value.poses is near
 
 
 def test_a_fit_hops_through_its_last_two_stages_as_its_quality_says(monkeypatch):

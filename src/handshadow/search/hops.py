@@ -44,28 +44,30 @@ def hop(
     best's could. A pose that is not a near miss comes back as it is. Ctrl-C or ``stop``
     raises finishing.Interrupted with the best so far."""
     best, score = poses, problem.scores(poses)[0]
-    depth = problem.mesh_penetration(poses)[0].deepest_mm
-    holdable = problem.holdable(poses)[0]
+    if rounds < 1 or not score.near_miss:
+        return poses
     generator = generator or torch.Generator(device="cpu").manual_seed(0)
-    for i in range(rounds):
-        if not score.near_miss:
-            break
-        log.info("a near miss (%s): hop %d of %d", score, i + 1, rounds)
-        params = PoseParameters(best.repeat(settings.copies), problem.limits)
-        jitter(params, settings.jitter, generator)
-        found = run_stages(problem, params.poses(), stages, stop=stop)
-        if found.interrupted:
-            raise Interrupted(best)
-        try:
+    try:
+        depth = problem.mesh_penetration(poses)[0].deepest_mm
+        holdable = problem.holdable(poses)[0]
+        for i in range(rounds):
+            if not score.near_miss:
+                break
+            log.info("a near miss (%s): hop %d of %d", score, i + 1, rounds)
+            params = PoseParameters(best.repeat(settings.copies), problem.limits)
+            jitter(params, settings.jitter, generator)
+            found = run_stages(problem, params.poses(), stages, stop=stop)
+            if found.interrupted:
+                raise Interrupted(best)
             out = finish(found.poses)
-        except Interrupted:  # a half-finished hop may still overlap: the best so far is kept
-            raise Interrupted(best) from None
-        out_score = problem.scores(out)[0]
-        out_depth = problem.mesh_penetration(out)[0].deepest_mm
-        if (
-            out_score.key() < score.key()
-            and out_depth <= max(depth, TOLERANCE_MM)
-            and (problem.holdable(out)[0] or not holdable)
-        ):
-            best, score, depth = out, out_score, out_depth
+            out_score = problem.scores(out)[0]
+            out_depth = problem.mesh_penetration(out)[0].deepest_mm
+            if (
+                out_score.key() < score.key()
+                and out_depth <= max(depth, TOLERANCE_MM)
+                and (problem.holdable(out)[0] or not holdable)
+            ):
+                best, score, depth = out, out_score, out_depth
+    except (KeyboardInterrupt, Interrupted):  # a half-finished hop may still overlap: the best so far is kept
+        raise Interrupted(best) from None
     return best
