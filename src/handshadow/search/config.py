@@ -146,7 +146,7 @@ class Finishing:
 class Hops:
     """A hop from a near miss (search.hops): ``copies`` copies of it, all but the first
     jittered by ``jitter`` sigmas (joint logits, rotation vector in radians, translation in
-    metres: about three times the polish's, enough to leave its basin, little enough to keep
+    metres: three to five times the polish's, enough to leave its basin, little enough to keep
     its shape), through the search's last ``stages`` stages again."""
 
     copies: int = 8
