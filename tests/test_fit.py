@@ -206,3 +206,18 @@ def test_frame_recorder_counts_over_both_searches_of_hands_auto_and_every_attemp
     assert [a for _, _, a in seen] == [0] * 200 + [1] * 200
     per_search = [sum(f.poses.n_hands == n and f.attempt == 1 for f in recorder.frames) for n in (1, 2)]
     assert min(per_search) >= 5  # both searches of an attempt are in the GIF's snapshots
+
+
+@pytest.mark.parametrize(("field", "value", "words"), [("attempts", 0, "attempt"), ("hops", -1, "hops")])
+def test_a_bad_count_from_python_fails_before_the_search(field, value, words, monkeypatch):
+    import handshadow.fit as fit_module
+    from handshadow.errors import HandshadowError
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("the search started")
+
+    monkeypatch.setattr(fit_module, "choose_starts", no_search)
+    target = np.zeros((32, 32), bool)
+    target[8:24, 10:22] = True
+    with pytest.raises(HandshadowError, match=words):
+        fit_frame(target, dataclasses.replace(FitConfig(size=32, quality="fast"), **{field: value}))

@@ -311,6 +311,7 @@ def fit_frame(
     t0 = time.perf_counter()
     config = dataclasses.replace(config, device=resolve_device(config.device))
     attempts = attempts_of(config)
+    hops_of(config)  # a bad count fails before the search, not after it
     # torch.optim imports torch._dynamo on first use, for seconds; a Ctrl-C inside that import
     # would leave it half-done and break every optimiser after it. Import it before the search,
     # where an interrupt has nothing to lose.
@@ -351,6 +352,14 @@ def attempts_of(config: FitConfig) -> int:
     if attempts < 1:
         raise HandshadowError(f"a fit needs at least one attempt, got {attempts}")
     return attempts
+
+
+def hops_of(config: FitConfig) -> int:
+    """How many hops an attempt may make from a near miss: config.hops, or the quality's (HOPS)."""
+    hops = HOPS[config.quality] if config.hops is None else config.hops
+    if hops < 0:
+        raise HandshadowError(f"hops cannot be negative, got {hops}")
+    return hops
 
 
 def result_key(result: FitResult) -> tuple:
@@ -428,7 +437,7 @@ def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: flo
             poses = polish(
                 problem, poses, rounds, near_rounds, patience=patience, stop=polish_stop, generator=generator
             )
-            hops = HOPS[config.quality] if config.hops is None else config.hops
+            hops = hops_of(config)
             if hops > 0:
                 _, _, stages = schedule(config.quality, config.iters, problem.height, config.device, views)
 
