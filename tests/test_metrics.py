@@ -47,6 +47,9 @@ def test_near_miss_is_a_failure_within_reach():
     assert not near(0.9, 0.035, 0.4)  # thin parts missed
     assert not near(0.75, 0.035, 0.9)  # IoU missed
     assert not near(0.9, 0.025, 0.9)  # a success
+    wider = FitScore(iou=0.9, boundary_f1=0.5, hd95=0.045, thin_recall=0.9)
+    assert wider.within(0.02) and not wider.within(0.01)  # a wider reach (the hops')
+    assert not FitScore(iou=0.9, boundary_f1=0.5, hd95=0.045, thin_recall=0.4).within(0.02)
 
 
 def test_one_iou_for_masks_batches_and_tensors():
@@ -79,6 +82,9 @@ def test_several_views_are_judged_together():
     both, one, none = (ViewScores(s, (0.5, 0.5)) for s in ((good, good), (good, bad), (bad, bad)))
     assert both.success and not one.success and not one.near_miss
     assert ViewScores((good, near), (0.5, 0.5)).near_miss
+    farther = FitScore(iou=0.9, boundary_f1=0.9, hd95=0.045, thin_recall=0.9)
+    assert ViewScores((good, farther), (0.5, 0.5)).within(0.02)
+    assert not ViewScores((good, farther), (0.5, 0.5)).near_miss
     assert sorted([none, one, both], key=ViewScores.key) == [both, one, none]
     # A view's weight decides which single success ranks first.
     front_first = ViewScores((good, bad), (0.8, 0.2))

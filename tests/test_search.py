@@ -433,6 +433,9 @@ def test_a_hop_turns_a_near_miss_into_a_success_and_leaves_others_alone():
     assert not problem.scores(far)[0].near_miss
     assert hop(problem, far, fine, finish, rounds=2, settings=settings) is far
     assert finished == [1]
+    # The reach decides what hops: none at all, the near miss comes back as it is.
+    assert hop(problem, near, fine, finish, rounds=2, settings=Hops(copies=4, reach_hd95=0.0)) is near
+    assert finished == [1]
 
 
 def test_a_stopped_hop_hands_back_the_pose_it_started_from():

@@ -74,10 +74,11 @@ VIEWS_POLISH_ROUNDS = {"fast": (2, 0, 1), "default": (4, 8, 3), "best": (6, 12, 
 # turned 10 into successes (9 with the next seed alone).
 ATTEMPTS = {"fast": 1, "default": 2, "best": 3}
 SKIP_TRIED = True  # a later attempt leaves out the library and atlas starts an earlier one searched
-# Hops an attempt may make from a near miss after its finishing steps (search.hops): its fine
-# stages again from harder-jittered copies, separated and polished, the better kept. On the
-# 20 near misses of the default's run on the 95 HSP targets, 2 hops turned 5 into successes,
-# each in its first attempt (README, Hops).
+# Hops an attempt may make from a result within reach after its finishing steps (search.hops,
+# config.Hops.reach_hd95): its fine stages again from harder-jittered copies, separated and
+# polished, the better kept. On the 20 near misses of the default's run on the 95 HSP targets,
+# 2 hops turned 5 into successes, each in its first attempt; reaching HD95 0.06 rather than
+# 0.04 passed 3 of 31 farther failures (README, Hops).
 HOPS = {"fast": 0, "default": 2, "best": 3}
 
 
@@ -98,8 +99,8 @@ class FitConfig:
     best kept (None: ATTEMPTS of the quality). lamp_to_wall_m: the point lamp's distance from
     the wall (scene.LAMP_TO_WALL_RANGE_M; one view only; None: scene.FIT_LAMP_TO_WALL_M for one
     view, scene.LAMP_TO_WALL_M for two); the frame on the wall keeps its size. hops: from a
-    near miss, the attempt's fine stages again from jittered copies (search.hops; None: HOPS
-    of the quality, 0: none)."""
+    result within reach of the success test (search.config.Hops.reach_hd95), the attempt's
+    fine stages again from jittered copies (search.hops; None: HOPS of the quality, 0: none)."""
 
     hands: str = "auto"
     size: int = 256
@@ -355,7 +356,7 @@ def attempts_of(config: FitConfig) -> int:
 
 
 def hops_of(config: FitConfig) -> int:
-    """How many hops an attempt may make from a near miss: config.hops, or the quality's (HOPS)."""
+    """How many hops an attempt may make from a result within reach: config.hops, or the quality's (HOPS)."""
     hops = HOPS[config.quality] if config.hops is None else config.hops
     if hops < 0:
         raise HandshadowError(f"hops cannot be negative, got {hops}")

@@ -54,11 +54,16 @@ class FitScore:
     def near_miss(self) -> bool:
         """Fails the success test, but within reach of it: IoU and thin-part recall met and
         HD95 within 0.01 of its bar (a few fingertips or a notch away)."""
+        return self.within(NEAR_MISS_HD95)
+
+    def within(self, hd95_margin: float) -> bool:
+        """Fails the success test with IoU and thin-part recall met and HD95 at most
+        ``hd95_margin`` (a share of the frame height) past its bar."""
         return (
             not self.success
             and self.iou >= SUCCESS_IOU
             and self.thin_recall >= SUCCESS_THIN
-            and self.hd95 <= SUCCESS_HD95 + NEAR_MISS_HD95
+            and self.hd95 <= SUCCESS_HD95 + hd95_margin
         )
 
     def as_dict(self) -> dict:
@@ -196,7 +201,11 @@ class ViewScores:
 
     @property
     def near_miss(self) -> bool:
-        return not self.success and all(s.success or s.near_miss for s in self.scores)
+        return self.within(NEAR_MISS_HD95)
+
+    def within(self, hd95_margin: float) -> bool:
+        """Fails, and every view is a success or within ``hd95_margin`` of it (FitScore.within)."""
+        return not self.success and all(s.success or s.within(hd95_margin) for s in self.scores)
 
     def key(self) -> tuple:
         if len(self.scores) == 1:

@@ -8,7 +8,7 @@
     starts.py     library poses and random hands, aligned to the target in 2D
     stages.py     run_stages(): coarse to fine, ranked and pruned after each stage
     finishing.py  separate(), polish(), keep_between_light_and_wall()
-    hops.py       hop(): a near miss's fine stages again from harder-jittered copies
+    hops.py       hop(): a close miss's fine stages again from harder-jittered copies
     config.py     the numbers: Stage, Weights, LearningRates, Reach, Finishing, Hops
 
 A hypothesis is one or two hands (poses.PoseBatch). Joint angles stay inside their limits by

@@ -1,7 +1,8 @@
-"""Hops: a near miss's way out of its basin, after the finishing steps.
+"""Hops: a close result's way out of its basin, after the finishing steps.
 
-A near miss (metrics.FitScore.near_miss: IoU and thin parts met, HD95 within 0.01 of its bar)
-has the shape but not the outline, and the polish's small steps stay in its basin. A hop
+A result within reach of the success test (metrics.FitScore.within: IoU and thin parts met,
+HD95 at most config.Hops.reach_hd95 past its bar) has the shape but not the outline, and the
+polish's small steps stay in its basin. A hop
 jitters copies of it harder than the polish does (config.Hops), sends them through the
 search's last stages again (stages.run_stages, the fine stages at full resolution) and
 finishes the best as the fit does (``finish``: separation, polish). The result is kept only
@@ -35,25 +36,26 @@ def hop(
     generator: torch.Generator | None = None,
     stop: Callable[[], bool] | None = None,
 ) -> PoseBatch:
-    """Up to ``rounds`` hops from a finished batch-1 pose while it is a near miss: each hop
+    """Up to ``rounds`` hops from a finished batch-1 pose while it is within
+    ``settings.reach_hd95`` of the success test: each hop
     runs ``settings.copies`` copies of the best so far (all but the first jittered by
     ``settings.jitter``: joint logits, rotation vector in radians, translation in metres)
     through ``stages``, then ``finish`` on the stages' best. A hop's result replaces the best
     only when its score ranks better (metrics.ViewScores.key), it goes no deeper into other
     flesh than the best (or the exact test's tolerance) and its arms can be held when the
-    best's could. A pose that is not a near miss comes back as it is. Ctrl-C or ``stop``
+    best's could. A pose out of reach (or a success) comes back as it is. Ctrl-C or ``stop``
     raises finishing.Interrupted with the best so far."""
     best, score = poses, problem.scores(poses)[0]
-    if rounds < 1 or not score.near_miss:
+    if rounds < 1 or not score.within(settings.reach_hd95):
         return poses
     generator = generator or torch.Generator(device="cpu").manual_seed(0)
     try:
         depth = problem.mesh_penetration(poses)[0].deepest_mm
         holdable = problem.holdable(poses)[0]
         for i in range(rounds):
-            if not score.near_miss:
+            if not score.within(settings.reach_hd95):
                 break
-            log.info("a near miss (%s): hop %d of %d", score, i + 1, rounds)
+            log.info("within reach (%s): hop %d of %d", score, i + 1, rounds)
             params = PoseParameters(best.repeat(settings.copies), problem.limits)
             jitter(params, settings.jitter, generator)
             found = run_stages(problem, params.poses(), stages, stop=stop)
