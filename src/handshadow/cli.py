@@ -242,7 +242,8 @@ def _add_fit_options(
         "--hops",
         type=int,
         help="from a result within reach of the success test (IoU and thin parts met, HD95 within 0.03 of "
-        "its bar), each attempt's fine stages again from jittered copies, the better kept; about 40 s each at 256 px (default: 0 fast, 2 default, 3 best)",
+        "its bar), each attempt's fine stages again from jittered copies, the better kept; about 40 s "
+        "each at 256 px (default: 0 fast, 2 default, 3 best)",
     )
     p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")

@@ -2,11 +2,11 @@
 
 A result within reach of the success test (metrics.FitScore.within: IoU and thin parts met,
 HD95 at most config.Hops.reach_hd95 past its bar) has the shape but not the outline, and the
-polish's small steps stay in its basin. A hop
-jitters copies of it harder than the polish does (config.Hops), sends them through the
-search's last stages again (stages.run_stages, the fine stages at full resolution) and
-finishes the best as the fit does (``finish``: separation, polish). The result is kept only
-when it ranks better and is no less performable; hops end at the first success.
+polish's small steps stay in its basin. A hop jitters copies of it harder than the polish
+does (config.Hops), sends them through the search's last stages again (stages.run_stages,
+the fine stages at full resolution) and finishes the best as the fit does (``finish``:
+separation, polish). The result is kept only when it ranks better and is no less
+performable; hops end at the first success.
 """
 
 from __future__ import annotations
