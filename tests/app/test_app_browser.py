@@ -384,11 +384,17 @@ def test_morph_tab_makes_a_performance(page):
 
     page.get_by_role("tab", name="Morph").click()
     frames = page.locator("#frames input[type=number]")
-    frames.fill("8")
-    frames.press("Enter")
     _choose(page, "morph-hands", "1")
     _choose(page, "morph-size", "64")
     _choose(page, "morph-quality", "fast")  # the page's default fits each end for minutes here
+    # The tab's fields mount when it is first shown; a value typed before its default settles
+    # was once overwritten (a morph of the default 30 frames). Type it last and see it held.
+    for _ in range(10):
+        frames.fill("8")
+        frames.press("Enter")
+        page.wait_for_timeout(200)
+        if frames.input_value() == "8":
+            break
     page.click("#morph")
     page.wait_for_selector("#morph-zip a[href]", timeout=240_000)
     names, z = _zip_names(page, "#morph-zip")
