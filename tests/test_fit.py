@@ -198,8 +198,13 @@ def test_frame_recorder_counts_over_both_searches_of_hands_auto_and_every_attemp
     for attempt in (0, 1):  # a failed fit's second attempt runs both searches again
         for n_hands in (1, 2):  # each search counts its own steps from 0
             for done in range(1, 101):
-                recorder(SimpleNamespace(done=done, total=100, poses=SimpleNamespace(n_hands=n_hands), attempt=attempt))
+                hands = SimpleNamespace(n_hands=n_hands)
+                recorder(SimpleNamespace(done=done, total=100, poses=hands, attempt=attempt, hop=0))
                 seen.append((recorder.done, recorder.finished, recorder.attempt))
+        kept = len(recorder.frames)
+        for done in range(1, 51):  # a hop's stages after the searches: neither counted nor kept
+            recorder(SimpleNamespace(done=done, total=50, poses=hands, attempt=attempt, hop=1))
+        assert (len(recorder.frames), recorder.done, recorder.finished) == (kept, seen[-1][0], True)
     assert [d for d, _, _ in seen] == list(range(1, 401))
     # finished only after each attempt's last search
     assert [f for _, f, _ in seen] == ([False] * 199 + [True]) * 2

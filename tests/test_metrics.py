@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from handshadow.metrics import FitScore, hd95, iou, score, thin_recall
+from handshadow.metrics import FitScore, far_outline, hd95, iou, score, thin_recall
 
 
 def head_with_ears(size: int = 200, ears: bool = True) -> np.ndarray:
@@ -113,3 +113,22 @@ def test_missing_parts_are_found_where_they_are_and_named_thin():
     text = parts_text(missing, extra)
     assert text.startswith("missing a thin part at the top right") and "extra shadow at the bottom left" in text
     assert parts_text([], []) == "nothing missing"
+
+
+def test_far_outline_marks_where_the_outline_fails_the_hd95_bar():
+    # The bar is 0.03 of the frame height: 3 px here.
+    target = np.zeros((100, 100), bool)
+    target[20:80, 20:80] = True
+    assert not far_outline(target, target).any()
+    # A hole of the target that the shadow fills: its outline is far from every shadow outline.
+    holed = target.copy()
+    holed[45:55, 45:55] = False
+    far = far_outline(target, holed)
+    assert far[44:56, 44:56].sum() == far.sum() == 40  # the ring of target pixels around the hole
+    # A bump of shadow 10 px out: its far end is past the bar, and so is the middle of the
+    # target's edge that it hides; its root and the rest of the square are not.
+    bumped = target.copy()
+    bumped[80:90, 45:55] = True
+    far = far_outline(bumped, target)
+    assert far[89, 45:55].all() and far[83:89, 45].all() and far[79, 48:52].all()
+    assert far.sum() == 10 + 2 * 6 + 4 and not far[80:83].any()

@@ -13,6 +13,7 @@ from handshadow.metrics import rank_key, score
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
 from handshadow.search import Hops, Interrupted, Stage, finishing, hop, objective, polish, separate
 from handshadow.search import stages as stages_module
+from handshadow.search.hops import focused_joints
 from tests.test_fit import known_target
 
 SIZE = 96
@@ -423,10 +424,21 @@ def test_a_hop_turns_a_near_miss_into_a_success_and_leaves_others_alone():
         return separate(problem, poses)
 
     settings = Hops(copies=4)
-    out = hop(problem, near, fine, finish, rounds=2, settings=settings, generator=torch.Generator().manual_seed(0))
+    seen = []
+    out = hop(
+        problem,
+        near,
+        fine,
+        finish,
+        rounds=2,
+        settings=settings,
+        generator=torch.Generator().manual_seed(0),
+        progress=seen.append,
+    )
     end = problem.scores(out)[0]
     assert end.success and end.key() < start.key()
     assert finished == [1]  # one hop, finished as a fit is; no second hop after a success
+    assert seen and {(p.hop, p.hops) for p in seen} == {(1, 2)} and seen[-1].done == seen[-1].total == 50
     # A pose that is not a near miss (a success, or one far from the bar) comes back as it is.
     assert hop(problem, truth, fine, finish, rounds=2, settings=settings) is truth
     far = _moved(truth)
@@ -467,15 +479,76 @@ def test_a_fit_hops_through_its_last_two_stages_as_its_quality_says(monkeypatch)
     target, _ = known_target("dog", 64)
     calls = []
 
-    def recording_hop(problem, poses, stages, finish, rounds, settings, generator, stop=None):
+    def recording_hop(problem, poses, stages, finish, rounds, settings, generator, stop=None, progress=None):
         calls.append((rounds, stages))
+        progress(dataclasses.replace(seen[-1], hop=1, hops=rounds))  # what a hop's stages report
         return poses
 
     monkeypatch.setattr(fit_module, "hop", recording_hop)
     base = FitConfig(hands="1", size=64, quality="fast", iters=4, attempts=1)
-    fit_frame(target, base)
-    assert calls == []  # fast makes no hops
-    fit_frame(target, dataclasses.replace(base, hops=3))
+    seen = []
+    fit_frame(target, base, progress=seen.append)
+    assert calls == [] and not any(p.hop for p in seen)  # fast makes no hops
+    fit_frame(target, dataclasses.replace(base, hops=3), progress=seen.append)
     _, _, stages = schedule("fast", 4, 64)
     assert calls == [(3, stages[-2:])]
+    assert (seen[-1].hop, seen[-1].hops, seen[-1].attempt) == (1, 3, 0)  # the fit's progress sees the hops
     assert fit_module.HOPS["default"] >= 1
+
+
+def _bent(poses, finger, by=0.8):
+    """The poses with one finger of the first hand bent ``by`` radians more at each joint."""
+    hands = [HandPoseBatch(*(t.clone() for t in h.args())) for h in poses.hands]
+    hands[0].pose_rad[:, 3 * finger : 3 * finger + 3, 2] += by
+    return PoseBatch(hands)
+
+
+def test_the_fingers_near_the_failing_outline_are_found():
+    problem, truth = _problem_and_truth()
+    assert not any(n.any() for n in focused_joints(problem, truth, 0.05))  # nothing fails
+    index = focused_joints(problem, _bent(truth, finger=1), 0.05)[0]
+    assert index[3:6].any() and not index[:3].any() and not index[12:].any()  # the index, not the thumb or little
+    thumb = focused_joints(problem, _bent(truth, finger=0), 0.05)[0]
+    assert thumb[:3].any() and not thumb[3:].any()
+
+
+def test_a_focused_jitter_moves_only_the_joints_it_names():
+    problem, truth = _problem_and_truth()
+    params = PoseParameters(truth.repeat(4), problem.limits)
+    before = [p.detach().clone() for p in params.hand_parameters(0)]
+    near = [torch.zeros(15, dtype=torch.bool)]
+    near[0][3:6] = True
+    finishing.jitter(params, (1.0, 0.1, 0.1), torch.Generator().manual_seed(0), rows=slice(2, None), joints_only=near)
+    joints, wrist, rotvec, trans = params.hand_parameters(0)
+    assert torch.equal(joints[:2], before[0][:2])  # rows before 2 as they were
+    assert not torch.equal(joints[2:, 3:6], before[0][2:, 3:6])
+    assert torch.equal(joints[:, :3], before[0][:, :3]) and torch.equal(joints[:, 6:], before[0][:, 6:])
+    assert torch.equal(wrist, before[1]) and torch.equal(rotvec, before[2]) and torch.equal(trans, before[3])
+
+
+def test_a_hops_last_copies_move_only_the_fingers_near_the_failing_outline(monkeypatch):
+    from handshadow.search import hops as hops_module
+
+    problem, truth = _problem_and_truth()
+    bent = _near_miss(truth)
+    near = focused_joints(problem, bent, Hops().focus_share)[0]
+    assert problem.scores(bent)[0].within(Hops().reach_hd95) and 0 < int(near.sum()) < 15
+    starts = []
+
+    def no_stages(problem, poses, stages, progress=None, stop=None):
+        starts.append(poses)
+        raise KeyboardInterrupt  # the hop hands back its start
+
+    monkeypatch.setattr(hops_module, "run_stages", no_stages)
+    with pytest.raises(Interrupted):
+        hop(problem, bent, [], lambda p: p, rounds=1)
+    copies = starts[0].hands[0]
+    start = PoseParameters(bent, problem.limits).poses().hands[0]  # within the joint limits
+    assert copies.batch == Hops().copies and torch.equal(copies.pose_rad[0], start.pose_rad[0])
+    focused = copies.select(slice(-Hops().focused, None))
+    moved = (focused.pose_rad - start.pose_rad).abs().amax((0, 2)) > 0
+    assert moved.any() and torch.equal(moved, moved & near)  # only near joints, and some of them
+    assert torch.equal(focused.translation, start.translation.expand_as(focused.translation))
+    assert torch.equal(focused.wrist_rad, start.wrist_rad.expand_as(focused.wrist_rad))
+    plain = copies.select(slice(1, -Hops().focused))
+    assert ((plain.pose_rad - start.pose_rad).abs().amax((0, 2)) > 0).all()  # the others move all over

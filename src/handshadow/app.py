@@ -286,12 +286,13 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
     yield FitUpdate(None, "Fitting..." + note, fraction=0.0)
     last = 0.0
     for p in job.updates():
-        fraction = min(1.0, p.done / max(p.total, 1))
+        fraction = 1.0 if p.hop else min(1.0, p.done / max(p.total, 1))  # a hop comes after the search
         if time.perf_counter() - last > PREVIEW_EVERY_S:
             last = time.perf_counter()
             preview = overlay_preview(target.frame, p.shadow, PREVIEW_ROWS)
             again = f" (a fresh attempt, {p.attempt + 1})" if p.attempt else ""
-            state = CANCELLING if session.cancel.is_set() else f"Fitting{again}... IoU {p.iou:.3f}"
+            hop = f" close to the shape, hop {p.hop} of {p.hops}:" if p.hop else ""
+            state = CANCELLING if session.cancel.is_set() else f"Fitting{again}...{hop} IoU {p.iou:.3f}"
             yield FitUpdate(preview, state + note, fraction=fraction)
     try:
         result_folder, result, lines = job.outcome()

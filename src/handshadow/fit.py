@@ -385,7 +385,7 @@ def _attempt(targets, scenes, config, progress, extra_starts, anchor, stop, limi
         if searches[-1].search.interrupted:
             break
     chosen = min(searches, key=HandCountFit.preference_key)
-    poses, finish_interrupted = _finish(chosen, config, stop, t0, limit)
+    poses, finish_interrupted = _finish(chosen, config, stop, t0, limit, progress)
     steps = sum(s.search.steps for s in searches)
     interrupted = finish_interrupted or any(s.search.interrupted for s in searches)
     return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, interrupted)
@@ -414,8 +414,11 @@ def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
     return default_views(width, height, config.light, angles, lamp)
 
 
-def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: float | None) -> tuple[PoseBatch, bool]:
-    """Separation, polish and placement of the chosen search's best: (poses, interrupted)."""
+def _finish(
+    chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: float | None, progress=None
+) -> tuple[PoseBatch, bool]:
+    """Separation, polish, hops and placement of the chosen search's best: (poses,
+    interrupted). ``progress`` sees the hops' stages."""
     problem, res = chosen.problem, chosen.search
     timed_out = False
 
@@ -450,7 +453,15 @@ def _finish(chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: flo
 
                 settings = Hops()
                 poses = hop(
-                    problem, poses, stages[-settings.stages :], finish, hops, settings, generator, stop=polish_stop
+                    problem,
+                    poses,
+                    stages[-settings.stages :],
+                    finish,
+                    hops,
+                    settings,
+                    generator,
+                    stop=polish_stop,
+                    progress=progress,
                 )
     except Interrupted as halt:  # Ctrl-C, stop or the time limit in the finishing steps: keep what they reached
         poses, interrupted = halt.poses, not timed_out

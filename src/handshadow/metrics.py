@@ -5,6 +5,7 @@ All functions take binary (H, W) numpy masks (shadow, target) and work in pixels
     iou              intersection over union
     boundary_f1      outlines within 2 px of each other, precision and recall combined
     hd95             95th percentile of outline-to-outline distances, both ways, / frame height
+    far_outline      the outline pixels beyond the HD95 bar (where a shadow fails it)
     thin_recall      share of the target's thin parts covered by the shadow; thin parts are
                      what an opening with a disc of radius 4 % of the frame height removes
 A fit is a success when IoU >= 0.8, thin-part recall >= 0.6 and HD95 <= 0.03.
@@ -152,6 +153,21 @@ def _hd95(o: _Outlines, height: int) -> float:
         return 1.0 if o.shadow.any() != o.target.any() else 0.0
     d = np.concatenate([o.shadow_to_target, o.target_to_shadow])
     return float(np.percentile(d, 95) / height)
+
+
+def far_outline(shadow: np.ndarray, target: np.ndarray, bar: float = SUCCESS_HD95) -> np.ndarray:
+    """(H, W) bool: the outline pixels, the shadow's and the target's, farther than ``bar`` (a
+    share of the frame height) from the other outline: the pixels above the HD95 bar, where
+    a shadow fails it (a part missing or added, a hole filled, light leaking through). Empty
+    when either outline is."""
+    o = _Outlines.of(np.asarray(shadow, bool), np.asarray(target, bool))
+    far = np.zeros(o.shadow.shape, bool)
+    if o.shadow_to_target is None:
+        return far
+    limit = bar * shadow.shape[0]
+    far[o.shadow] = o.shadow_to_target > limit
+    far[o.target] |= o.target_to_shadow > limit
+    return far
 
 
 def thin_parts(target: np.ndarray) -> np.ndarray:

@@ -74,7 +74,8 @@ class FrameRecorder:
     one per hand count, each counting its steps from 0). ``done`` is that count over every
     attempt so far, ``attempt`` the current attempt (fit.fit_frame starts afresh while a
     result fails the success test) and ``finished`` says whether its last search has taken
-    its last step."""
+    its last step. The hops' stages (Progress.hop) are not counted or kept: they come after
+    the searches, and their result is the GIF's last frame."""
 
     def __init__(self, total_steps: int, searches: int = 1, limit: int = 36):
         self.every = max(1, total_steps // limit)
@@ -89,6 +90,8 @@ class FrameRecorder:
         self._search = 0
 
     def __call__(self, p: Progress) -> None:
+        if p.hop:
+            return
         if p.attempt != self.attempt:  # a fresh attempt: its searches count from the first
             self.attempt, self._search = p.attempt, -1
         if p.done < self._last or self._search < 0:  # the next search began
@@ -172,7 +175,8 @@ def fit_to_folder(
             bar.set_postfix(iou=f"{p.iou:.3f}")
             # After the last search's last step come the separation, the polish and the export.
             again = f" (attempt {p.attempt + 1})" if p.attempt else ""
-            bar.set_description(("finishing" if recorder.finished else "fitting") + again)
+            doing = "finishing" if recorder.finished else "fitting"
+            bar.set_description((f"hop {p.hop} of {p.hops}" if p.hop else doing) + again)
 
     result = fit_frame(frames[0] if len(frames) == 1 else frames, config, progress=on_progress, stop=stop)
     if bar is not None:

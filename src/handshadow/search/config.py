@@ -148,7 +148,10 @@ class Hops:
     """A hop from a close miss (search.hops): ``copies`` copies of it, all but the first
     jittered by ``jitter`` sigmas (joint logits, rotation vector in radians, translation in
     metres: three to five times the polish's, enough to leave its basin, little enough to keep
-    its shape), through the search's last ``stages`` stages again. A result hops while it
+    its shape; the last ``focused`` of them jittered only in the joints of the fingers within
+    ``focus_share`` of the frame height of the outline pixels beyond the HD95 bar
+    (search.hops.focused_joints), by ``focus_jitter`` logits, the rest of the pose as it is),
+    go through the search's last ``stages`` stages again. A result hops while it
     fails with IoU and thin parts met and HD95 at most ``reach_hd95`` past its bar: three
     times the polish's near miss (metrics.NEAR_MISS_HD95), an outline at most twice as far
     off as the bar allows. On 31 HSP targets that failed with HD95 beyond 0.04, reaching 0.03
@@ -158,3 +161,6 @@ class Hops:
     jitter: tuple[float, float, float] = (0.5, 0.05, 0.01)
     stages: int = 2
     reach_hd95: float = 3 * NEAR_MISS_HD95
+    focused: int = 3  # of the copies, this many jitter only the fingers near the failing outline
+    focus_jitter: float = 1.0  # their joints' jitter, logits
+    focus_share: float = 0.05  # a finger within this share of the frame height of it is near

@@ -242,17 +242,26 @@ def polish_round(
     return best["score"], best["poses"]
 
 
-def jitter(params: PoseParameters, sigmas: tuple[float, float, float], generator: torch.Generator) -> None:
-    """Add Gaussian noise to every copy but the first: sigmas for the angle logits, the
-    rotation vector (radians) and the translation (metres)."""
+def jitter(
+    params: PoseParameters,
+    sigmas: tuple[float, float, float],
+    generator: torch.Generator,
+    rows: slice = slice(1, None),
+    joints_only: list[torch.Tensor] | None = None,
+) -> None:
+    """Add Gaussian noise to the copies ``rows`` (default every copy but the first): sigmas
+    for the angle logits, the rotation vector (radians) and the translation (metres).
+    joints_only: per hand slot a (15,) bool, the joints that get noise (then the wrist's
+    logits get none)."""
     with torch.no_grad():
         for i in range(params.n_hands):
             joints, wrist, rotvec, trans = params.hand_parameters(i)
             for group, sigma in zip(((joints, wrist), (rotvec,), (trans,)), sigmas):
                 for p in group:
                     noise = torch.randn(p.shape, generator=generator).to(p) * sigma
-                    noise[0] = 0
-                    p.add_(noise)
+                    if joints_only is not None:
+                        noise *= joints_only[i].to(p)[None, :, None] if p is joints else 0.0
+                    p[rows] += noise[rows]
 
 
 @torch.no_grad()

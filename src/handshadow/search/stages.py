@@ -28,7 +28,8 @@ class Progress:
     their total, the best hypothesis's current shadow (H, W) numpy at the stage resolution
     (view 0's), its IoU, its poses (PoseBatch of batch 1), its loss terms by name, and with
     several views the other views' shadows (H, W) at the stage resolution; the fit's attempt
-    (0 first, fit.fit_frame) it belongs to."""
+    (0 first, fit.fit_frame) it belongs to; from a hop's stages (search.hops) the hop (1 first)
+    and the hops it may make, its steps counted from 0 again (0 and 0 from the search)."""
 
     stage: int
     step: int
@@ -40,6 +41,8 @@ class Progress:
     terms: dict[str, float] = dataclasses.field(default_factory=dict)
     more_shadows: tuple[np.ndarray, ...] = ()
     attempt: int = 0
+    hop: int = 0
+    hops: int = 0
 
 
 @dataclasses.dataclass
