@@ -50,6 +50,8 @@ def test_near_miss_is_a_failure_within_reach():
     wider = FitScore(iou=0.9, boundary_f1=0.5, hd95=0.045, thin_recall=0.9)
     assert wider.within(0.02) and not wider.within(0.01)  # a wider reach (the hops')
     assert not FitScore(iou=0.9, boundary_f1=0.5, hd95=0.045, thin_recall=0.4).within(0.02)
+    short = FitScore(iou=0.9, boundary_f1=0.5, hd95=0.025, thin_recall=0.57)  # thin parts a little short
+    assert short.within(0.0, thin_margin=0.05) and not short.within(0.02) and not short.within(0.02, 0.02)
 
 
 def test_one_iou_for_masks_batches_and_tensors():

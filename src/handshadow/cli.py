@@ -241,8 +241,8 @@ def _add_fit_options(
     p.add_argument(
         "--hops",
         type=int,
-        help="from a result within reach of the success test (IoU and thin parts met, HD95 within 0.03 of "
-        "its bar), each attempt's fine stages again from jittered copies, the better kept; about 40 s "
+        help="from a result within reach of the success test (IoU met, thin parts within 0.05 and HD95 "
+        "within 0.03 of their bars), each attempt's fine stages again from jittered copies, the better kept; about 40 s "
         "each at 256 px (default: 0 fast, 2 default, 3 best)",
     )
     p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])

@@ -57,13 +57,14 @@ class FitScore:
         HD95 within 0.01 of its bar (a few fingertips or a notch away)."""
         return self.within(NEAR_MISS_HD95)
 
-    def within(self, hd95_margin: float) -> bool:
-        """Fails the success test with IoU and thin-part recall met and HD95 at most
-        ``hd95_margin`` (a share of the frame height) past its bar."""
+    def within(self, hd95_margin: float, thin_margin: float = 0.0) -> bool:
+        """Fails the success test with IoU met, HD95 at most ``hd95_margin`` (a share of the
+        frame height) past its bar and thin-part recall at most ``thin_margin`` short of
+        its bar."""
         return (
             not self.success
             and self.iou >= SUCCESS_IOU
-            and self.thin_recall >= SUCCESS_THIN
+            and self.thin_recall >= SUCCESS_THIN - thin_margin
             and self.hd95 <= SUCCESS_HD95 + hd95_margin
         )
 
@@ -219,9 +220,9 @@ class ViewScores:
     def near_miss(self) -> bool:
         return self.within(NEAR_MISS_HD95)
 
-    def within(self, hd95_margin: float) -> bool:
-        """Fails, and every view is a success or within ``hd95_margin`` of it (FitScore.within)."""
-        return not self.success and all(s.success or s.within(hd95_margin) for s in self.scores)
+    def within(self, hd95_margin: float, thin_margin: float = 0.0) -> bool:
+        """Fails, and every view is a success or within the margins of it (FitScore.within)."""
+        return not self.success and all(s.success or s.within(hd95_margin, thin_margin) for s in self.scores)
 
     def key(self) -> tuple:
         if len(self.scores) == 1:

@@ -152,15 +152,16 @@ class Hops:
     ``focus_share`` of the frame height of the outline pixels beyond the HD95 bar
     (search.hops.focused_joints), by ``focus_jitter`` logits, the rest of the pose as it is),
     go through the search's last ``stages`` stages again. A result hops while it
-    fails with IoU and thin parts met and HD95 at most ``reach_hd95`` past its bar: three
-    times the polish's near miss (metrics.NEAR_MISS_HD95), an outline at most twice as far
-    off as the bar allows. On 31 HSP targets that failed with HD95 beyond 0.04, reaching 0.03
+    fails with IoU met, thin-part recall at most ``reach_thin`` short of its bar and HD95 at
+    most ``reach_hd95`` past its bar: three times the polish's near miss
+    (metrics.NEAR_MISS_HD95), an outline at most twice as far off as the bar allows. On 31 HSP targets that failed with HD95 beyond 0.04, reaching 0.03
     rather than 0.01 passed 3 more (README, Hops)."""
 
     copies: int = 8
     jitter: tuple[float, float, float] = (0.5, 0.05, 0.01)
     stages: int = 2
     reach_hd95: float = 3 * NEAR_MISS_HD95
+    reach_thin: float = 0.05  # and thin-part recall at most this short of its bar (0.6)
     focused: int = 3  # of the copies, this many jitter only the fingers near the failing outline
     focus_jitter: float = 1.0  # their joints' jitter, logits
     focus_share: float = 0.05  # a finger within this share of the frame height of it is near

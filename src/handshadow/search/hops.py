@@ -1,7 +1,7 @@
 """Hops: a close result's way out of its basin, after the finishing steps.
 
-A result within reach of the success test (metrics.FitScore.within: IoU and thin parts met,
-HD95 at most config.Hops.reach_hd95 past its bar) has the shape but not the outline, and the
+A result within reach of the success test (metrics.FitScore.within: IoU met, thin parts at
+most config.Hops.reach_thin short and HD95 at most config.Hops.reach_hd95 past their bars) has the shape but not the outline, and the
 polish's small steps stay in its basin. A hop jitters copies of it harder than the polish
 does (config.Hops), sends them through the search's last stages again (stages.run_stages,
 the fine stages at full resolution) and finishes the best as the fit does (``finish``:
@@ -47,7 +47,7 @@ def hop(
     progress: Callable[[Progress], None] | None = None,
 ) -> PoseBatch:
     """Up to ``rounds`` hops from a finished batch-1 pose while it is within
-    ``settings.reach_hd95`` of the success test: each hop runs ``settings.copies`` copies of
+    ``settings.reach_hd95`` and ``settings.reach_thin`` of the success test: each hop runs ``settings.copies`` copies of
     the best so far (all but the first jittered by ``settings.jitter``: joint logits, rotation
     vector in radians, translation in metres; the last ``settings.focused`` of them only in
     the fingers near the failing outline, by ``settings.focus_jitter``) through ``stages``,
@@ -58,14 +58,14 @@ def hop(
     (search.Progress with hop and hops set). Ctrl-C or ``stop`` raises finishing.Interrupted
     with the best so far."""
     best, score = poses, problem.scores(poses)[0]
-    if rounds < 1 or not score.within(settings.reach_hd95):
+    if rounds < 1 or not score.within(settings.reach_hd95, settings.reach_thin):
         return poses
     generator = generator or torch.Generator(device="cpu").manual_seed(0)
     try:
         depth = problem.mesh_penetration(poses)[0].deepest_mm
         holdable = problem.holdable(poses)[0]
         for i in range(rounds):
-            if not score.within(settings.reach_hd95):
+            if not score.within(settings.reach_hd95, settings.reach_thin):
                 break
             log.info("within reach (%s): hop %d of %d", score, i + 1, rounds)
             tell = None if progress is None else functools.partial(_told, progress, i + 1, rounds)
