@@ -1,15 +1,15 @@
 """Hops: a close result's way out of its basin, after the finishing steps.
 
 A result within reach of the success test (metrics.FitScore.within: IoU met, thin parts at
-most config.Hops.reach_thin short and HD95 at most config.Hops.reach_hd95 past their bars) has the shape but not the outline, and the
-polish's small steps stay in its basin. A hop jitters copies of it harder than the polish
-does (config.Hops), sends them through the search's last stages again (stages.run_stages,
-the fine stages at full resolution) and finishes the best as the fit does (``finish``:
-separation, polish). A few of the copies jitter only the fingers whose shadow lies where
-the outline fails the HD95 bar (metrics.far_outline: a part missing or added, a hole filled,
-light leaking through), harder, and leave the rest of the pose as it is
-(``focused_joints``). The result is kept only when it ranks better and is no less
-performable; hops end at the first success.
+most config.Hops.reach_thin short and HD95 at most config.Hops.reach_hd95 past their bars)
+has the shape but not the outline, and the polish's small steps stay in its basin. A hop
+jitters copies of it harder than the polish does (config.Hops), sends them through the
+search's last stages again (stages.run_stages, the fine stages at full resolution) and
+finishes the best as the fit does (``finish``: separation, polish). A few of the copies
+jitter only the fingers whose shadow lies where the outline fails the HD95 bar
+(metrics.far_outline: a part missing or added, a hole filled, light leaking through),
+harder, and leave the rest of the pose as it is (``focused_joints``). The result is kept
+only when it ranks better and is no less performable; hops end at the first success.
 """
 
 from __future__ import annotations
@@ -47,8 +47,8 @@ def hop(
     progress: Callable[[Progress], None] | None = None,
 ) -> PoseBatch:
     """Up to ``rounds`` hops from a finished batch-1 pose while it is within
-    ``settings.reach_hd95`` and ``settings.reach_thin`` of the success test: each hop runs ``settings.copies`` copies of
-    the best so far (all but the first jittered by ``settings.jitter``: joint logits, rotation
+    ``settings.reach_hd95`` and ``settings.reach_thin`` of the success test: each hop runs
+    ``settings.copies`` copies of the best so far (all but the first jittered by ``settings.jitter``: joint logits, rotation
     vector in radians, translation in metres; the last ``settings.focused`` of them only in
     the fingers near the failing outline, by ``settings.focus_jitter``) through ``stages``,
     then ``finish`` on the stages' best. A hop's result replaces the best only when its score
