@@ -245,6 +245,7 @@ def test_inputs_folders_globs_files_and_examples(tmp_path):
         (["dog", "--scheduler", "nowhere"], "cannot reach a Dask scheduler at nowhere"),
         (["dog", "--size", "8"], "--size must be between"),
         (["dog", "--hops", "-1"], "--hops must be between 0 and 20"),
+        (["dog", "--seed", "-3"], "--seed must be a whole number"),
         pytest.param(
             ["dog", "--dashboard"],
             "--dashboard needs bokeh",

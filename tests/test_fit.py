@@ -120,6 +120,8 @@ def test_bad_targets_fail_cleanly(tmp_path):
         (["--lamp-distance", "nan"], "lamp's distance"),
         (["--lamp-distance", "3", "--light", "directional"], "--lamp-distance needs a point light"),
         (["bird", "--lamp-distance", "3"], "--lamp-distance works with one target"),
+        (["--seed", "-1"], "--seed must be a whole number from 0 to 4294967295, got -1"),
+        (["--seed", str(2**40)], "--seed must be a whole number"),
     ],
 )
 def test_bad_options_fail_cleanly(tmp_path, args, message):

@@ -2,6 +2,7 @@
 the finishing steps (separation, polish) that never hand back worse."""
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -358,6 +359,8 @@ def test_a_failed_fit_starts_afresh_with_fresh_starts_and_keeps_the_better(monke
     assert np.array_equal(attempts[0].shadow, single.shadow) and attempts[0].score == single.score
     keys = [{start_key(o) for o in s.origins} - {None} for s in starts]
     assert keys[0] and not keys[0] & keys[1] and attempts[1].posed.fit["seed"] == 1
+    # The steps reported are the search steps of both attempts.
+    assert both.steps == attempts[0].steps + attempts[1].steps == both.posed.fit["iterations"]
     # The better attempt is kept.
     better = min(range(2), key=lambda k: fit_module.result_key(attempts[k]))
     assert both.posed.fit["attempt"] == better + 1 and both.score == attempts[better].score
@@ -384,6 +387,93 @@ def test_a_stop_in_a_later_attempt_keeps_the_best_so_far(monkeypatch):
     assert result.interrupted and result.posed.fit["interrupted"] is True and result.posed.fit["attempts_run"] == 2
     better = min(range(2), key=lambda k: fit_module.result_key(attempts[k]))
     assert result.score == attempts[better].score and np.array_equal(result.shadow, attempts[better].shadow)
+
+
+def test_ctrl_c_while_a_later_attempt_sets_up_keeps_the_first(monkeypatch):
+    from handshadow import fit as fit_module
+
+    target, _ = known_target("dog", 64)
+    base = FitConfig(hands="1", size=64, quality="fast", iters=2, exclude_library=("dog",), attempts=3)
+    first = fit_frame(target, dataclasses.replace(base, attempts=1))
+    assert not first.success  # so a second attempt starts
+    real_choose, calls = fit_module.choose_starts, []
+
+    def ctrl_c_on_the_second(*a, **k):  # Ctrl-C while the second attempt picks its starts
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_choose(*a, **k)
+
+    monkeypatch.setattr(fit_module, "choose_starts", ctrl_c_on_the_second)
+    result = fit_frame(target, base)
+    assert len(calls) == 2 and result.interrupted and result.posed.fit["interrupted"] is True
+    assert result.posed.fit["attempt"] == 1 and result.posed.fit["attempts_run"] == 1
+    assert result.score == first.score and np.array_equal(result.shadow, first.shadow)
+
+
+def _fit_ending_inside(monkeypatch, stop=None):
+    """A two-hand bird fit whose search ends with the palms 18 mm inside each other, the
+    separation's calls recorded (the poses' deepest mm and the stop it was given)."""
+    from handshadow import fit as fit_module
+
+    target, truth = known_target("bird", SIZE)
+    inside = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
+    real_search, real_separate, calls = fit_module.run_stages, fit_module.separate, []
+
+    def search_ending_inside(problem, starts, stages, **kw):
+        result = real_search(problem, starts, stages, **kw)
+        result.poses = inside
+        return result
+
+    def watched(problem, poses, **kw):
+        calls.append((problem.mesh_penetration(poses)[0].deepest_mm, kw.get("stop")))
+        if len(calls) == 1 and stop is None:  # Ctrl-C at the separation's first step
+            raise Interrupted(poses)
+        return real_separate(problem, poses, **kw)
+
+    monkeypatch.setattr(fit_module, "run_stages", search_ending_inside)
+    monkeypatch.setattr(fit_module, "separate", watched)
+    config = FitConfig(hands="2", size=SIZE, quality="fast", iters=6, lamp_to_wall_m=truth.scene.light.position[2])
+    return fit_frame(target, config, stop=stop), calls
+
+
+def test_ctrl_c_during_the_separation_still_ends_with_the_hands_apart(monkeypatch):
+    result, calls = _fit_ending_inside(monkeypatch)
+    assert calls[0][0] > 10 and len(calls) == 2  # interrupted at once, then run to its end
+    assert result.interrupted and result.posed.fit["interrupted"] is True
+    assert result.penetration.deepest_mm <= 3.0 and result.penetration.performable()
+
+
+def test_a_stop_during_the_separation_still_ends_with_the_hands_apart(monkeypatch):
+    pressed = []  # the app's Cancel, pressed once the search is over
+
+    def stop():
+        return bool(pressed)
+
+    from handshadow import fit as fit_module
+
+    real_separated = fit_module._separated
+    monkeypatch.setattr(fit_module, "_separated", lambda chosen: pressed.append(1) or real_separated(chosen))
+    result, calls = _fit_ending_inside(monkeypatch, stop=stop)
+    assert pressed and calls and all(given is None for _, given in calls)  # the separation is not stopped
+    assert result.penetration.deepest_mm <= 3.0 and result.penetration.performable()
+
+
+def test_the_time_limit_counts_the_set_up(monkeypatch):
+    import time
+
+    from handshadow import fit as fit_module
+
+    target, _ = known_target("dog", 64)
+    real_choose = fit_module.choose_starts
+
+    def slow(*a, **k):  # a set-up slower than the whole limit (the atlas's first build takes minutes)
+        time.sleep(0.6)
+        return real_choose(*a, **k)
+
+    monkeypatch.setattr(fit_module, "choose_starts", slow)
+    result = fit_frame(target, FitConfig(hands="auto", size=64, quality="fast", time_limit_s=0.5))
+    assert result.steps == 2 and not result.interrupted  # one step per hand count: each found its time spent
 
 
 @pytest.mark.parametrize("quality", ["fast", "default", "best"])
@@ -448,6 +538,40 @@ def test_a_hop_turns_a_near_miss_into_a_success_and_leaves_others_alone():
     # The reach decides what hops: none at all, the near miss comes back as it is.
     assert hop(problem, near, fine, finish, rounds=2, settings=Hops(copies=4, reach_hd95=0.0)) is near
     assert finished == [1]
+
+
+class _ScriptedProblem:
+    """What hop asks of a problem, scripted per pose: (rank key, deepest mm, arms holdable)."""
+
+    def __init__(self, table):
+        self.table = table
+
+    def scores(self, poses):
+        key = self.table[poses][0]
+        return [SimpleNamespace(within=lambda *a: True, key=lambda: (key,))]
+
+    def mesh_penetration(self, poses):
+        return [SimpleNamespace(deepest_mm=self.table[poses][1])]
+
+    def holdable(self, poses):
+        return [self.table[poses][2]]
+
+
+def test_a_hop_never_trades_arms_that_can_be_held_for_arms_that_cannot(monkeypatch):
+    from handshadow.search import hops as hops_module
+
+    # The start's arms cannot be held; hop 1 ranks better and can be held; hop 2 ranks better
+    # still but cannot: hop 1's result must stay.
+    problem = _ScriptedProblem({"start": (3, 0.0, False), "hop 1": (2, 0.0, True), "hop 2": (1, 0.0, False)})
+    results = iter(["hop 1", "hop 2"])
+    monkeypatch.setattr(hops_module, "_copies", lambda problem, best, *a: best)
+    monkeypatch.setattr(hops_module, "run_stages", lambda p, c, *a, **k: SimpleNamespace(poses=c, interrupted=False))
+    out = hop(
+        problem, "start", [Stage(height=SIZE, blur_px=0, attract_px=0, steps=1, keep=1)], lambda p: next(results), 2
+    )
+    assert out == "hop 1"
+    # No stages to run: no hop.
+    assert hop(problem, "start", [], lambda p: next(results), 2) == "start"
 
 
 def test_a_stopped_hop_hands_back_the_pose_it_started_from():

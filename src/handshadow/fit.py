@@ -87,7 +87,8 @@ class FitConfig:
     """Everything a fit needs besides the target.
 
     hands: '1', '2' or 'auto' (tries both, prefers one hand when it does as well);
-    size: frame height in pixels (width follows the target frame); iters: total optimisation
+    size: frame height in pixels that pipeline and the CLI resize the target to (width follows
+    the target frame; fit_frame itself fits at the target's own size); iters: total optimisation
     steps (None: the quality's default); quality: 'fast', 'default' or 'best';
     time_limit_s: bounds the search and the polish (None or 0: no limit);
     exclude_library: library poses the search must not start from (tests and benchmarks
@@ -165,7 +166,7 @@ class FitResult:
     shadow: np.ndarray  # (H, W) bool at full resolution
     target: np.ndarray  # (H, W) bool
     meshes: list[PosedMesh]
-    steps: int
+    steps: int  # the search's optimisation steps, every attempt run (pose.json: iterations)
     seconds: float
     interrupted: bool
     poses: PoseBatch  # the result as tensors (batch 1, hand-slot order as posed.hands)
@@ -313,6 +314,7 @@ def fit_frame(
     config = dataclasses.replace(config, device=resolve_device(config.device))
     attempts = attempts_of(config)
     hops_of(config)  # a bad count fails before the search, not after it
+    check_seed(config.seed)
     # torch.optim imports torch._dynamo on first use, for seconds; a Ctrl-C inside that import
     # would leave it half-done and break every optimiser after it. Import it before the search,
     # where an interrupt has nothing to lose.
@@ -321,7 +323,7 @@ def fit_frame(
     targets = [np.asarray(target, bool)] if isinstance(target, np.ndarray) else [np.asarray(t, bool) for t in target]
     scenes = view_scenes(targets, config)
     limit = config.time_limit_s or None  # seconds; None or 0: no limit
-    best, interrupted, runs = None, False, 0
+    best, interrupted, runs, steps = None, False, 0, 0
     tried: dict[int, set] = {}  # per hand count, the library and atlas starts searched so far
     for k in range(attempts):
         left = None if limit is None else limit - (time.perf_counter() - t0)
@@ -329,8 +331,15 @@ def fit_frame(
             break
         tell = None if progress is None else (lambda p, k=k: progress(dataclasses.replace(p, attempt=k)))
         attempt = dataclasses.replace(config, seed=config.seed + k)
-        result = _attempt(targets, scenes, attempt, tell, extra_starts, anchor, stop, left, tried)
+        try:
+            result = _attempt(targets, scenes, attempt, tell, extra_starts, anchor, stop, left, tried)
+        except KeyboardInterrupt:  # Ctrl-C while a later attempt sets up: the best so far stands
+            if best is None:
+                raise
+            interrupted = True
+            break
         runs += 1
+        steps += result.steps
         interrupted = interrupted or result.interrupted
         if best is None or result_key(result) < result_key(best):
             best, chosen = result, k
@@ -340,10 +349,15 @@ def fit_frame(
             log.info("attempt %d of %d failed the success test (%s): a fresh start", k + 1, attempts, result.score)
     seconds = time.perf_counter() - t0
     fit = dict(
-        best.posed.fit, seconds=round(seconds, 2), interrupted=interrupted, attempt=chosen + 1, attempts_run=runs
+        best.posed.fit,
+        iterations=steps,
+        seconds=round(seconds, 2),
+        interrupted=interrupted,
+        attempt=chosen + 1,
+        attempts_run=runs,
     )
     return dataclasses.replace(
-        best, posed=dataclasses.replace(best.posed, fit=fit), seconds=seconds, interrupted=interrupted
+        best, posed=dataclasses.replace(best.posed, fit=fit), steps=steps, seconds=seconds, interrupted=interrupted
     )
 
 
@@ -353,6 +367,16 @@ def attempts_of(config: FitConfig) -> int:
     if attempts < 1:
         raise HandshadowError(f"a fit needs at least one attempt, got {attempts}")
     return attempts
+
+
+MAX_SEED = 2**32 - 1
+
+
+def check_seed(seed: int) -> int:
+    """The seed if it is a whole number from 0 to MAX_SEED; else HandshadowError."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= MAX_SEED:
+        raise HandshadowError(f"the seed must be a whole number from 0 to {MAX_SEED}, got {seed!r}")
+    return int(seed)
 
 
 def hops_of(config: FitConfig) -> int:
@@ -377,10 +401,11 @@ def _attempt(targets, scenes, config, progress, extra_starts, anchor, stop, limi
     left out, and this attempt's are added."""
     t0 = time.perf_counter()
     counts = hand_counts(config, extra_starts if extra_starts is not None else anchor)
-    deadline = limit / len(counts) if limit else None
     searches = []
-    for n in counts:
+    for i, n in enumerate(counts):
         seen = set() if tried is None else tried.setdefault(n, set())
+        # Each hand count gets an equal share of what is left of the limit, from its own set-up on.
+        deadline = (limit - (time.perf_counter() - t0)) / (len(counts) - i) if limit else None
         searches.append(_search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop, seen))
         if searches[-1].search.interrupted:
             break
@@ -388,7 +413,10 @@ def _attempt(targets, scenes, config, progress, extra_starts, anchor, stop, limi
     poses, finish_interrupted = _finish(chosen, config, stop, t0, limit, progress)
     steps = sum(s.search.steps for s in searches)
     interrupted = finish_interrupted or any(s.search.interrupted for s in searches)
-    return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, interrupted)
+    try:
+        return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, interrupted)
+    except KeyboardInterrupt:  # Ctrl-C while the finished pose is measured: measure it, then stop
+        return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, True)
 
 
 def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
@@ -429,12 +457,9 @@ def _finish(
         timed_out = limit is not None and time.perf_counter() - t0 > limit
         return timed_out
 
-    interrupted = False
-    try:  # the separation always runs to its end after a stopped search: a result must not penetrate
-        chosen.left_mm = problem.mesh_penetration(res.poses)[0].deepest_mm
-        poses = separate(problem, res.poses, stop=None if res.interrupted else stop)
-        chosen.separation_iou = float(iou(problem.shadows(poses)[0], problem.shadows(res.poses)[0]))
-        if not res.interrupted:
+    poses, interrupted = _separated(chosen)
+    try:
+        if not (res.interrupted or interrupted):
             views = len(problem.views)
             rounds, near_rounds, patience = (POLISH_ROUNDS if views == 1 else VIEWS_POLISH_ROUNDS)[config.quality]
             generator = torch.Generator(device="cpu").manual_seed(config.seed)
@@ -455,7 +480,7 @@ def _finish(
                 poses = hop(
                     problem,
                     poses,
-                    stages[-settings.stages :],
+                    stages[max(0, len(stages) - settings.stages) :],
                     finish,
                     hops,
                     settings,
@@ -468,6 +493,32 @@ def _finish(
         if timed_out:
             log.info("the polish stopped at the time limit")
     return keep_between_light_and_wall(problem, poses), interrupted
+
+
+def _separated(chosen: HandCountFit) -> tuple[PoseBatch, bool]:
+    """The search's best separated until the exact mesh test passes (finishing.separate), run
+    to its end even after a stopped search or a Ctrl-C during it, since a result must not
+    penetrate: (poses, whether Ctrl-C came meanwhile). Sets chosen.left_mm (how deep the
+    search's result went) and chosen.separation_iou (shadow after against before)."""
+    problem, found = chosen.problem, chosen.search.poses
+    interrupted = False
+    try:
+        chosen.left_mm = problem.mesh_penetration(found)[0].deepest_mm
+    except KeyboardInterrupt:
+        interrupted = True
+    try:
+        poses = separate(problem, found, stop=None)
+    except Interrupted as halt:  # Ctrl-C: finish the separation from where it stood, then stop
+        interrupted = True
+        try:
+            poses = separate(problem, halt.poses)
+        except Interrupted as again:  # Ctrl-C twice: as it stands
+            poses = again.poses
+    try:
+        chosen.separation_iou = float(iou(problem.shadows(poses)[0], problem.shadows(found)[0]))
+    except KeyboardInterrupt:
+        interrupted = True
+    return poses, interrupted
 
 
 def _result(targets, scenes, chosen: HandCountFit, poses: PoseBatch, config, steps, seconds, interrupted) -> FitResult:
@@ -569,6 +620,7 @@ def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1
 def _search(
     targets, scenes, n_hands, config, progress, deadline, extra_starts=None, anchor=None, stop=None, tried=None
 ):
+    t0 = time.perf_counter()  # the deadline (seconds) counts the set-up too
     sides = ["right", "left"][:n_hands]
     weights = config.view_weights or (1.0,) * len(targets)
     more = [ViewTarget(s, t, w / weights[0]) for s, t, w in zip(scenes[1:], targets[1:], weights[1:])]
@@ -584,6 +636,8 @@ def _search(
     skip = frozenset(tried) if SKIP_TRIED else frozenset()
     starts = choose_starts(problem, sides, n_random, n_keep, rng, extra_starts, config.exclude_library, atlas, skip)
     tried.update(start_key(o) for o in starts.origins or [] if start_key(o) is not None)
+    if deadline is not None:
+        deadline -= time.perf_counter() - t0
     res = run_stages(problem, starts, stages, progress=progress, deadline_s=deadline, stop=stop)
     return HandCountFit(n_hands, sides, problem, res)
 

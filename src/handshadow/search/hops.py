@@ -4,8 +4,9 @@ A result within reach of the success test (metrics.FitScore.within: IoU met, thi
 most config.Hops.reach_thin short and HD95 at most config.Hops.reach_hd95 past their bars)
 has the shape but not the outline, and the polish's small steps stay in its basin. A hop
 jitters copies of it harder than the polish does (config.Hops), sends them through the
-search's last stages again (stages.run_stages, the fine stages at full resolution) and
-finishes the best as the fit does (``finish``: separation, polish). A few of the copies
+search's last stages again (stages.run_stages, config.Hops.stages of them: with the default
+quality the two at full resolution) and finishes the best as the fit does (``finish``:
+separation, polish). A few of the copies
 jitter only the fingers whose shadow lies where the outline fails the HD95 bar
 (metrics.far_outline: a part missing or added, a hole filled, light leaking through),
 harder, and leave the rest of the pose as it is (``focused_joints``). The result is kept
@@ -57,11 +58,14 @@ def hop(
     of reach (or a success) comes back as it is. ``progress`` sees the hops' stages
     (search.Progress with hop and hops set). Ctrl-C or ``stop`` raises finishing.Interrupted
     with the best so far."""
-    best, score = poses, problem.scores(poses)[0]
-    if rounds < 1 or not score.within(settings.reach_hd95, settings.reach_thin):
+    best = poses
+    if rounds < 1 or not stages:
         return poses
     generator = generator or torch.Generator(device="cpu").manual_seed(0)
     try:
+        score = problem.scores(poses)[0]
+        if not score.within(settings.reach_hd95, settings.reach_thin):
+            return poses
         depth = problem.mesh_penetration(poses)[0].deepest_mm
         holdable = problem.holdable(poses)[0]
         for i in range(rounds):
@@ -75,12 +79,13 @@ def hop(
             out = finish(found.poses)
             out_score = problem.scores(out)[0]
             out_depth = problem.mesh_penetration(out)[0].deepest_mm
+            out_holdable = problem.holdable(out)[0]
             if (
                 out_score.key() < score.key()
                 and out_depth <= max(depth, TOLERANCE_MM)
-                and (problem.holdable(out)[0] or not holdable)
+                and (out_holdable or not holdable)
             ):
-                best, score, depth = out, out_score, out_depth
+                best, score, depth, holdable = out, out_score, out_depth, out_holdable
     except (KeyboardInterrupt, Interrupted):  # a half-finished hop may still overlap: the best so far is kept
         raise Interrupted(best) from None
     return best
