@@ -306,10 +306,11 @@ def fit_frame(
     extra_starts: hypotheses (hand slots right first) always tried, as given and aligned to
     the target; anchor: batch-1 poses the solution should stay close to (a morph's other
     end). Either fixes the number of hands to theirs. stop: checked at every step of the
-    search and of the finishing steps; True stops the fit as Ctrl-C does (the best result so
-    far, marked interrupted; the separation of overlapping hands still runs after a stopped
-    search). config.time_limit_s bounds the search and the polish of all attempts (not marked
-    interrupted); the separation always completes."""
+    search and of the finishing steps but the separation; True stops the fit as Ctrl-C does
+    (the best result so far, marked interrupted). The separation of overlapping hands always
+    runs to its end, after a stop or a Ctrl-C too: a result must not penetrate.
+    config.time_limit_s bounds the search (set-up included) and the polish of all attempts
+    (not marked interrupted)."""
     t0 = time.perf_counter()
     config = dataclasses.replace(config, device=resolve_device(config.device))
     attempts = attempts_of(config)
