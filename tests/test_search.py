@@ -665,7 +665,7 @@ def test_a_hops_last_copies_move_only_the_fingers_near_the_failing_outline(monke
 
     monkeypatch.setattr(hops_module, "run_stages", no_stages)
     with pytest.raises(Interrupted):
-        hop(problem, bent, [], lambda p: p, rounds=1)
+        hop(problem, bent, [Stage(height=SIZE, blur_px=0, attract_px=0, steps=1, keep=1)], lambda p: p, rounds=1)
     copies = starts[0].hands[0]
     start = PoseParameters(bent, problem.limits).poses().hands[0]  # within the joint limits
     assert copies.batch == Hops().copies and torch.equal(copies.pose_rad[0], start.pose_rad[0])
