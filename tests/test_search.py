@@ -140,27 +140,9 @@ def test_a_stage_that_layers_its_hypotheses_refits_the_shadow_with_the_hands_apa
 
 
 def test_a_fit_whose_search_ends_in_penetration_comes_out_apart(monkeypatch):
-    from handshadow import fit as fit_module
-
-    target, truth = known_target("bird", SIZE)
-    inside = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])  # palms 18 mm deep
-    real_search, real_separate, seen = fit_module.run_stages, fit_module.separate, []
-
-    def search_ending_inside(problem, starts, stages, **kw):
-        result = real_search(problem, starts, stages, **kw)
-        result.poses = inside
-        return result
-
-    def watched(problem, poses, **kw):
-        seen.append(problem.mesh_penetration(poses)[0].deepest_mm)
-        return real_separate(problem, poses, **kw)
-
-    monkeypatch.setattr(fit_module, "run_stages", search_ending_inside)
-    monkeypatch.setattr(fit_module, "separate", watched)
-    # The search's result is the true pose, so the fit's lamp is the one the target was cast by.
-    config = FitConfig(hands="2", size=SIZE, quality="fast", iters=6, lamp_to_wall_m=truth.scene.light.position[2])
-    result = fit_frame(target, config)
-    assert seen and seen[0] > 10  # the search's result had the hands inside each other
+    result, calls = _fit_ending_inside(monkeypatch)
+    target, _ = known_target("bird", SIZE)
+    assert calls and calls[0][0] > 10  # the search's result had the hands inside each other
     assert result.penetration.deepest_mm <= 3.0 and result.penetration.performable()
     assert result.posed.fit["penetration_mm"] == round(result.penetration.deepest_mm, 2)
     assert result.posed.fit["performable"] == result.performable
@@ -411,9 +393,11 @@ def test_ctrl_c_while_a_later_attempt_sets_up_keeps_the_first(monkeypatch):
     assert result.score == first.score and np.array_equal(result.shadow, first.shadow)
 
 
-def _fit_ending_inside(monkeypatch, stop=None):
-    """A two-hand bird fit whose search ends with the palms 18 mm inside each other, the
-    separation's calls recorded (the poses' deepest mm and the stop it was given)."""
+def _fit_ending_inside(monkeypatch, stop=None, ctrl_c=False):
+    """A two-hand bird fit whose search ends with the palms 18 mm inside each other (the
+    search's result is the true pose, so the fit's lamp is the one the target was cast by),
+    the separation's calls recorded (the poses' deepest mm and the stop it was given);
+    ``ctrl_c``: Ctrl-C at the separation's first step."""
     from handshadow import fit as fit_module
 
     target, truth = known_target("bird", SIZE)
@@ -427,7 +411,7 @@ def _fit_ending_inside(monkeypatch, stop=None):
 
     def watched(problem, poses, **kw):
         calls.append((problem.mesh_penetration(poses)[0].deepest_mm, kw.get("stop")))
-        if len(calls) == 1 and stop is None:  # Ctrl-C at the separation's first step
+        if len(calls) == 1 and ctrl_c:
             raise Interrupted(poses)
         return real_separate(problem, poses, **kw)
 
@@ -438,7 +422,7 @@ def _fit_ending_inside(monkeypatch, stop=None):
 
 
 def test_ctrl_c_during_the_separation_still_ends_with_the_hands_apart(monkeypatch):
-    result, calls = _fit_ending_inside(monkeypatch)
+    result, calls = _fit_ending_inside(monkeypatch, ctrl_c=True)
     assert calls[0][0] > 10 and len(calls) == 2  # interrupted at once, then run to its end
     assert result.interrupted and result.posed.fit["interrupted"] is True
     assert result.penetration.deepest_mm <= 3.0 and result.penetration.performable()
