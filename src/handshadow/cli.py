@@ -144,7 +144,7 @@ def _check_target(source: str, invert: bool | None = None) -> None:
 def _fit_config(args: argparse.Namespace, resolve: bool = True):
     """A FitConfig from the fit options; ``resolve=False`` leaves the device as given (a batch
     resolves it on each worker)."""
-    from handshadow.fit import MAX_SEED, FitConfig, check_seed
+    from handshadow.fit import FitConfig, check_seed
     from handshadow.scene import check_lamp_distance
 
     if args.size < 32 or args.size > 2048:
@@ -155,10 +155,7 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
         raise HandshadowError(f"--attempts must be between 1 and 20, got {args.attempts}")
     if args.hops is not None and not 0 <= args.hops <= 20:
         raise HandshadowError(f"--hops must be between 0 and 20, got {args.hops}")
-    try:
-        check_seed(args.seed)
-    except HandshadowError:
-        raise HandshadowError(f"--seed must be a whole number from 0 to {MAX_SEED}, got {args.seed}") from None
+    check_seed(args.seed, "--seed")
     config = FitConfig(
         hands=args.hands,
         size=args.size,

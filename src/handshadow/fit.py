@@ -373,10 +373,10 @@ def attempts_of(config: FitConfig) -> int:
 MAX_SEED = 2**32 - 1
 
 
-def check_seed(seed: int) -> int:
-    """The seed if it is a whole number from 0 to MAX_SEED; else HandshadowError."""
+def check_seed(seed: int, name: str = "the seed") -> int:
+    """The seed if it is a whole number from 0 to MAX_SEED; else HandshadowError (naming it ``name``)."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= MAX_SEED:
-        raise HandshadowError(f"the seed must be a whole number from 0 to {MAX_SEED}, got {seed!r}")
+        raise HandshadowError(f"{name} must be a whole number from 0 to {MAX_SEED}, got {seed!r}")
     return int(seed)
 
 
