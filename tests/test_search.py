@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from handshadow.fit import CONTACTS_EVERY, FitConfig, fit_frame, make_problem, schedule
+from handshadow.fit import CONTACTS_EVERY, OUTLINE_THIN, FitConfig, fit_frame, make_problem, schedule
 from handshadow.hands.limits import JointLimits
 from handshadow.metrics import rank_key, score
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
-from handshadow.search import Hops, Interrupted, Stage, finishing, hop, objective, polish, separate
+from handshadow.search import Finishing, Hops, Interrupted, Stage, finishing, hop, objective, polish, separate
 from handshadow.search import stages as stages_module
 from handshadow.search.hops import focused_joints
 from tests.test_fit import known_target
@@ -472,6 +472,22 @@ def test_the_first_stage_never_runs_the_exact_mesh_test(quality):
     assert big[0].contacts_every == 0 and big[-1].contacts_every == CONTACTS_EVERY > 0
     two_views = schedule(quality, None, 64, views=2)[2]
     assert two_views[0].contacts_every == 0 and two_views[-1].contacts_every == CONTACTS_EVERY
+
+
+@pytest.mark.parametrize("quality", ["fast", "default", "best"])
+def test_the_exact_outline_stages_weigh_spills_as_the_polish_does(quality):
+    # The blurred, skeleton-guided stages find the shape; the exact ones at the end fit its
+    # outline, weigh spills and notches as the polish does and thin parts more (the spill
+    # weight alone pulled them in). The last stage is always one.
+    polish = Finishing()
+    for views in (1, 2):
+        stages = schedule(quality, None, 256, views=views)[2]
+        assert stages[0].spill is None and stages[-1].spill == polish.polish_spill
+        assert stages[-1].notches == polish.polish_notches
+        for st in stages:
+            exact = st.blur_px <= 1 and st.skeleton <= 0.05
+            want = (OUTLINE_THIN, polish.polish_spill, polish.polish_notches) if exact else (None, None, None)
+            assert (st.thin, st.spill, st.notches) == want
 
 
 def _near_miss(truth):

@@ -30,6 +30,7 @@ from handshadow.posefile import parse_pose
 from handshadow.poses import PoseBatch, PosedScene
 from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, Scene, check_view_angle, default_views
 from handshadow.search import (
+    Finishing,
     Hops,
     Interrupted,
     Problem,
@@ -59,6 +60,13 @@ ONE_HAND_PREFERENCE = 0.02
 # The stages at full resolution push out what the exact mesh test finds inside other flesh,
 # found afresh every this many steps (search.objective.ExactContacts; 0 turns it off).
 CONTACTS_EVERY = 10
+# The exact-outline stages (blur at most this many pixels, skeleton guides at most this factor)
+# weigh spills and the target's holes and notches as the polish does (Finishing's
+# polish_spill and polish_notches), and thin parts at OUTLINE_THIN (twice Weights.thin): the
+# spill weight alone pulled thin parts in as it pulled spills back (README, **Outline stages**).
+OUTLINE_STAGE_BLUR_PX = 1.0
+OUTLINE_STAGE_SKELETON = 0.05
+OUTLINE_THIN = 8.0
 CUDA_WIDER = 16  # on a GPU the search keeps this many times the hypotheses (see schedule)
 MAX_VIEWS = 2  # targets one pose may answer: today's lamp and wall, and one turned about the hands
 # With several views each shadow's outline is pulled by the other views too and settles more
@@ -218,13 +226,15 @@ def schedule(
     quality: str, iters: int | None, size: int, device: str = "cpu", views: int = 1
 ) -> tuple[int, int, list[Stage]]:
     """(random starts, kept starts, stages) for a quality, scaled to a total step budget. On a
-        GPU a batch of a thousand hypotheses costs about what one does, so it keeps CUDA_WIDER
-        times the starts and CUDA_WIDER / 4 times the survivors of every stage but the last. With
-        several views a last exact stage (VIEWS_SETTLE) settles the pose in all of them. The stages
+    GPU a batch of a thousand hypotheses costs about what one does, so it keeps CUDA_WIDER
+    times the starts and CUDA_WIDER / 4 times the survivors of every stage but the last. With
+    several views a last exact stage (VIEWS_SETTLE) settles the pose in all of them. The stages
     at full resolution push out the exact mesh contacts (CONTACTS_EVERY), all but the first: a
     small frame (64 px) brings the first stage to full resolution too, and its many
     hypotheses, a broad search, go without the slow exact test. After every stage but
-    the last, hands inside each other pass one in front of the other (Stage.layer)."""
+    the last, hands inside each other pass one in front of the other (Stage.layer). The
+    exact-outline stages weigh spills, notches and thin parts more (OUTLINE_THIN and the
+    polish's weights)."""
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
     s = Stage
@@ -268,6 +278,13 @@ def schedule(
     stages = [
         dataclasses.replace(st, contacts_every=CONTACTS_EVERY) if st.height == size and i > 0 else st
         for i, st in enumerate(stages)
+    ]
+    finishing = Finishing()
+    stages = [
+        dataclasses.replace(st, thin=OUTLINE_THIN, spill=finishing.polish_spill, notches=finishing.polish_notches)
+        if st.blur_px <= OUTLINE_STAGE_BLUR_PX and st.skeleton <= OUTLINE_STAGE_SKELETON
+        else st
+        for st in stages
     ]
     stages = [dataclasses.replace(st, layer=True) for st in stages[:-1]] + stages[-1:]
     if iters is not None:

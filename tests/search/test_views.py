@@ -104,3 +104,20 @@ def test_the_objective_keeps_its_image_maps_per_weights_and_blur():
     spilled, _ = objective(used, poses.hands, STAGE, variants[3])
     plain, _ = objective(used, poses.hands, STAGE)
     assert float(spilled.image[1]) > float(plain.image[1])  # the moved pose spills: spill weighs it more
+
+
+def test_a_stage_sets_its_own_spill_and_notch_weights():
+    """Stage.thin / spill / notches replace the weights' own at that stage (the schedule's
+    exact-outline stages weigh spills as the polish does); unset, the weights stand."""
+    import dataclasses
+
+    target, scene, poses = _dog()
+    problem = make_problem(target, scene, ["right"], FitConfig(size=SIZE, device="cpu"))
+    exact = dataclasses.replace(STAGE, blur_px=0)
+    assert exact.weights(problem.weights) is problem.weights
+    plain, _ = objective(problem, poses.hands, exact)
+    spilled, _ = objective(problem, poses.hands, dataclasses.replace(exact, spill=20.0, notches=4.0))
+    assert float(spilled.image[1]) > 1.2 * float(plain.image[1])  # the moved pose spills: it weighs more
+    zero, _ = objective(problem, poses.hands, dataclasses.replace(exact, spill=0.0, notches=0.0, thin=4.0))
+    assert problem.weights.thin == 4.0
+    assert torch.equal(zero.image, plain.image)  # the weights' own: the same terms

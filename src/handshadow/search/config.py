@@ -24,7 +24,9 @@ class Stage:
     survive the stage; lr_scale: factor on the learning rates; skeleton: weight factor of the
     skeleton terms (long-range guides: joints inside the target, fingers to thin parts);
     contacts_every: how often the exact mesh test (hands.penetration) finds the vertices
-    inside other flesh for the objective's contacts term (0: the term is off); layer: after
+    inside other flesh for the objective's contacts term (0: the term is off); thin, spill,
+    notches: the image term's extra weights on the target's thin parts, outside it and on its
+    holes and notches at this stage (None: the Weights' own); layer: after
     the stage, each kept hypothesis whose hands pass through each other has one put in front
     of the other along the light's rays, so the stages after it fit the shadow with the hands
     apart instead of the separation pushing them apart at the end (one view only)."""
@@ -38,6 +40,15 @@ class Stage:
     skeleton: float = 1.0
     contacts_every: int = 0  # find the exact mesh contacts afresh every this many steps (0: off)
     layer: bool = False  # after the stage, hands inside each other pass one in front (finishing.pass_in_front)
+    thin: float | None = None  # Weights.thin at this stage (None: as the weights say)
+    spill: float | None = None  # Weights.spill at this stage (None: as the weights say)
+    notches: float | None = None  # Weights.notches at this stage (None: as the weights say)
+
+    def weights(self, w: Weights) -> Weights:
+        """The weights this stage optimises with: w, with the stage's thin, spill and notches
+        weights where set."""
+        changes = {k: getattr(self, k) for k in ("thin", "spill", "notches") if getattr(self, k) is not None}
+        return dataclasses.replace(w, **changes) if changes else w
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,8 +59,8 @@ class Weights:
     thin: float = 4.0  # extra weight of the target's thin parts in the image term
     depth: float = 20.0  # extra weight per frame height of depth inside the target (holes cost more)
     depth_cap: float = 0.05  # frame heights: depth (and spill distance) beyond this weighs no more
-    spill: float = 0.0  # the same outside the target, per frame height of distance (the polish uses it)
-    notches: float = 0.0  # extra weight of the target's holes and narrow notches (the polish uses it)
+    spill: float = 0.0  # the same outside the target, per frame height of distance (exact stages, polish)
+    notches: float = 0.0  # extra weight of the target's holes and narrow notches (exact stages, polish)
     excess: float = 2.0
     attraction: float = 0.3
     penetration: float = 0.02

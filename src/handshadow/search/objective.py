@@ -109,13 +109,14 @@ def view_objective(
     contacts: ExactContacts | None = None,
 ) -> tuple[LossTerms, list[Shadow]]:
     """The loss terms of B hypotheses at a stage over all the problem's views, and their exact
-    shadow per view at the stage's resolution. The image terms (image, excess, gaps,
+    shadow per view at the stage's resolution. weights: the problem's unless given, with the
+    stage's own where it sets them (Stage.weights). The image terms (image, excess, gaps,
     attraction, inside, thin_pull) are each view's weighted by its weight; placement and the
     arms' rules hold in every view (summed); penetration, contacts, reach and the anchor are
     counted once. contacts: the stage's exact mesh contacts (None: that term is zero). With
     one view this is the single-view objective exactly (its terms are built in the same
     order, so even the gradients' rounding is the same)."""
-    w = weights or problem.weights
+    w = stage.weights(weights or problem.weights)
     outs = problem.pose(hands)
     levels = [problem.level(stage.height, k) for k in range(len(problem.views))]
     views = [_view_image_terms(level, outs, stage, w) for level in levels]
