@@ -4,7 +4,7 @@ success). It runs on `handshadow batch` (Dask), so it scales out with --workers 
 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
                         [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
-                        [--fits-only] [--no-forearm] [--lamp-distance M] [--hops N]
+                        [--fits-only] [--no-forearm] [--lamp-distance M] [--hops N] [--attempts N]
 
 Prints one row per target as it finishes: the shadow's measures, the deepest penetration
 between or within the hands (pen, mm, exact on the meshes), whether the pose can be held
@@ -70,6 +70,7 @@ def main() -> None:
         help="metres from lamp to wall (handshadow fit --lamp-distance)",
     )
     parser.add_argument("--hops", type=int, default=None, help="hops from a near miss (handshadow fit --hops)")
+    parser.add_argument("--attempts", type=int, default=None, help="fresh starts (handshadow fit --attempts)")
     parser.add_argument("--workers", type=int, default=1, help="local Dask workers, each fitting one target at a time")
     parser.add_argument("--threads-per-worker", type=int, help="torch threads per worker (default: cores / workers)")
     parser.add_argument("--scheduler", help="an existing Dask cluster instead of a local one")
@@ -106,6 +107,7 @@ def main() -> None:
         forearm=not args.no_forearm,
         lamp_to_wall_m=args.lamp_distance,
         hops=args.hops,
+        attempts=args.attempts,
     )
     if args.fits_only:
         fits_only(targets, config, args.workers, threads)

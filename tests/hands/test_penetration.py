@@ -6,7 +6,7 @@ import pytest
 import torch
 import trimesh
 
-from handshadow.hands.penetration import TOLERANCE_MM, contact_penalty, hand_parts, penetration
+from handshadow.hands.penetration import TOLERANCE_MM, Hull, contact_penalty, hand_parts, penetration
 
 
 def _box(size, centre):
@@ -25,6 +25,25 @@ def test_boxes_overlapping_by_5_mm_fail_and_by_1_mm_pass(overlap_mm, performable
     # Apart, nothing is inside.
     c = _box([0.06, 0.06, 0.06], [0.2, 0.0, 0.0])
     assert penetration([a[0], c[0]], [a[1], c[1]]).between_mm == 0.0
+
+
+def test_boxes_turned_off_the_axes_overlap_as_deep():
+    # The test looks for inside points in a box along the surface's own axes: turned boxes
+    # (a rod across the frame's axes) must give the depth they give unturned.
+    turn = trimesh.transformations.rotation_matrix(0.7, [1.0, 2.0, 0.5])[:3, :3]
+    a = _box([0.2, 0.02, 0.02], [0.0, 0.0, 0.0])
+    b = _box([0.06, 0.06, 0.06], [0.1 + 0.03 - 0.004, 0.0, 0.0])
+    pen = penetration([a[0] @ turn.T, b[0] @ turn.T], [a[1], b[1]])
+    assert pen.between_mm == pytest.approx(4.0, abs=1e-6)
+
+
+def test_a_hull_holds_its_surface_but_not_the_empty_corners_of_its_axis_aligned_box():
+    rod = trimesh.creation.box(extents=[0.2, 0.02, 0.02])
+    rod.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 4, [0, 0, 1]))
+    hull = Hull.of(np.asarray(rod.vertices))
+    assert hull.holds(np.asarray(rod.sample(500, seed=0))).all()
+    corner = np.asarray(rod.vertices).max(0)  # a corner of the axis-aligned box, far off the rod
+    assert not hull.holds(corner[None])[0]
 
 
 @pytest.fixture(scope="module")

@@ -30,6 +30,7 @@ import torch
 from handshadow.hands.rig import boundary_loops
 
 TOLERANCE_MM = 3.0  # what skin gives: deeper than this, the pose cannot be held
+HULL_PAD_M = 1e-6  # Hull's margin: a micrometre, far above rounding, far below any depth that counts
 FINGER_BASE = 0  # segment index of a finger's base (MCP; the thumb's CMC)
 
 
@@ -152,19 +153,51 @@ def penetration(
     found, between = [], 0.0
     if len(positions) == 2:
         for a, b in ((0, 1), (1, 0)):
-            c = _inside(positions[a], np.arange(len(positions[a])), positions[b], faces[b], a, b, report_mm)
+            hull = Hull.of(positions[b][faces[b].ravel()])
+            c = _inside(positions[a], np.arange(len(positions[a])), positions[b], faces[b], a, b, report_mm, hull)
             between = max(between, float(c.depth_m.max(initial=0.0)) * 1000)
             found.append(c)
     within = []
     for h, split in enumerate(parts or []):
+        closed = {part.name: part.closed(positions[h]) for part in (*split.fingers, split.palm)}
+        hulls = {name: Hull.of(verts[tri.ravel()]) for name, (verts, tri) in closed.items()}
         deepest = 0.0
         for target, queries in _part_pairs(split):
-            verts, tri = target.closed(positions[h])
-            c = _inside(positions[h], queries, verts, tri, h, h, report_mm, n_surface=len(target.faces))
+            verts, tri = closed[target.name]
+            c = _inside(
+                positions[h], queries, verts, tri, h, h, report_mm, hulls[target.name], n_surface=len(target.faces)
+            )
             deepest = max(deepest, float(c.depth_m.max(initial=0.0)) * 1000)
             found.append(c)
         within.append(deepest)
     return Penetration(between, tuple(within), Contacts.cat(found))
+
+
+@dataclasses.dataclass(frozen=True)
+class Hull:
+    """A box that holds a surface, along the principal axes of its points: no point outside it
+    can be inside the surface, so the winding numbers are worked out for the points in it only.
+    A finger lying across the frame's axes fills a fraction of its axis-aligned box. The box
+    is HULL_PAD_M larger each way, so that rounding in its turned frame loses no point of the
+    surface itself."""
+
+    centre: np.ndarray  # (3,)
+    axes: np.ndarray  # (3, 3), one axis per column
+    lo: np.ndarray  # (3,) the box's extent along each axis from the centre
+    hi: np.ndarray
+
+    @staticmethod
+    def of(points: np.ndarray) -> Hull:
+        """The box of points (N, 3)."""
+        centre = points.mean(0)
+        _, axes = np.linalg.eigh(np.cov((points - centre).T))
+        local = (points - centre) @ axes
+        return Hull(centre, axes, local.min(0) - HULL_PAD_M, local.max(0) + HULL_PAD_M)
+
+    def holds(self, points: np.ndarray) -> np.ndarray:
+        """(N,) bool: which points (N, 3) lie in the box."""
+        local = (points - self.centre) @ self.axes
+        return np.all((local >= self.lo) & (local <= self.hi), 1)
 
 
 def _part_pairs(split: HandParts):
@@ -177,13 +210,12 @@ def _part_pairs(split: HandParts):
         yield split.palm, beyond_base
 
 
-def _inside(query_pos, query_idx, verts, tri, mesh, other, report_mm, n_surface=None) -> Contacts:
-    """Contacts of the query vertices (indices into query_pos) inside the closed (verts, tri);
-    the nearest point is sought on its first n_surface triangles (the skin, not a part's caps)."""
+def _inside(query_pos, query_idx, verts, tri, mesh, other, report_mm, hull: Hull, n_surface=None) -> Contacts:
+    """Contacts of the query vertices (indices into query_pos) inside the closed (verts, tri),
+    whose points the hull holds; the nearest point is sought on its first n_surface triangles
+    (the skin, not a part's caps)."""
     pts = query_pos[query_idx]
-    corners = verts[tri].reshape(-1, 3)  # the surface's own vertices (verts may hold the whole hand's)
-    lo, hi = corners.min(0), corners.max(0)
-    near = np.all((pts >= lo) & (pts <= hi), 1)  # only points in the surface's box can be inside
+    near = hull.holds(pts)  # only points in the surface's box can be inside
     if not near.any():
         return Contacts.empty()
     idx, pts = query_idx[near], pts[near]
