@@ -237,7 +237,7 @@ def _add_fit_options(
         "--attempts",
         type=int,
         help="fresh starts (seed, seed+1, ...) while the result fails the success test, the best kept "
-        "(default: 1 fast, 2 default, 3 best)",
+        "(default: 1 fast, 3 default, 4 best)",
     )
     p.add_argument(
         "--hops",
