@@ -37,7 +37,8 @@ import numpy as np
 from scipy import ndimage
 
 from handshadow.batch import find_targets, run_batch
-from handshadow.fit import FitConfig
+from handshadow.errors import HandshadowError
+from handshadow.fit import FitConfig, attempts_of, hops_of
 from handshadow.hands.penetration import TOLERANCE_MM as PENETRATION_TOLERANCE_MM
 from handshadow.scene import FIT_LAMP_TO_WALL_M
 
@@ -109,6 +110,10 @@ def main() -> None:
         hops=args.hops,
         attempts=args.attempts,
     )
+    try:  # a bad count fails here in one line, not in every worker
+        attempts_of(config), hops_of(config)
+    except HandshadowError as e:
+        parser.error(str(e))
     if args.fits_only:
         fits_only(targets, config, args.workers, threads)
         return
