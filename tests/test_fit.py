@@ -146,7 +146,9 @@ def test_non_empty_output_folder_is_kept(tmp_path):
     assert (tmp_path / "keep" / "mine.txt").read_text() == "precious"
 
 
-def test_ctrl_c_writes_the_best_result_so_far(tmp_path):
+@pytest.mark.parametrize("sent", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_ctrl_c_or_a_sigterm_writes_the_best_result_so_far(tmp_path, sent):
+    # A SIGTERM is a job runner's or `timeout`'s way to stop a fit: it keeps the best, as Ctrl-C does.
     out = tmp_path / "interrupted"
     proc = subprocess.Popen(
         PY
@@ -180,7 +182,7 @@ def test_ctrl_c_writes_the_best_result_so_far(tmp_path):
             break
     assert lines and lines[-1].startswith("stage 1 of"), "".join(lines)
     time.sleep(1)  # a few steps into it
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sent)
     _, rest = proc.communicate(timeout=240)
     err = "".join(lines) + rest
     assert proc.returncode == 130, err
@@ -215,7 +217,9 @@ def test_frame_recorder_counts_over_both_searches_of_hands_auto_and_every_attemp
     assert min(per_search) >= 5  # both searches of an attempt are in the GIF's snapshots
 
 
-@pytest.mark.parametrize(("field", "value", "words"), [("attempts", 0, "attempt"), ("hops", -1, "hops")])
+@pytest.mark.parametrize(
+    ("field", "value", "words"), [("attempts", 0, "attempt"), ("hops", -1, "hops"), ("skip_attempts", 1, "skip_attempts")]
+)
 def test_a_bad_count_from_python_fails_before_the_search(field, value, words, monkeypatch):
     import handshadow.fit as fit_module
     from handshadow.errors import HandshadowError

@@ -1,8 +1,9 @@
 """Command line: arguments -> configuration -> pipeline. No tensor code here.
 
 Every expected failure (bad input, missing files, unusable output folder) ends with a one-line
-message on stderr and exit status 2; an interrupt exits with 130; a batch in which some
-targets failed (and the others were fitted) exits with 1.
+message on stderr and exit status 2; an interrupt (Ctrl-C, or a SIGTERM such as a job
+runner's or ``timeout``'s) exits with 130, a fit keeping its best result so far; a batch in
+which some targets failed (and the others were fitted) exits with 1.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
+import signal
 import sys
 from pathlib import Path
 
@@ -282,8 +284,6 @@ def cmd_print(args: argparse.Namespace) -> int:
 
 
 def cmd_batch(args: argparse.Namespace) -> int:
-    import signal
-
     from handshadow.batch import find_targets, run_batch
 
     for flag, value in (("--workers", args.workers), ("--threads-per-worker", args.threads_per_worker)):
@@ -294,9 +294,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
     targets = find_targets(args.inputs)
     config = _fit_config(args, resolve=False)
     say = (lambda line: None) if args.quiet else print
-    # A job runner's SIGTERM ends the batch as Ctrl-C does: finished results kept, cluster shut down.
-    on_term = signal.signal(signal.SIGTERM, signal.default_int_handler)
-    try:
+    try:  # Ctrl-C or SIGTERM (main): finished results kept, cluster shut down
         report = run_batch(
             targets,
             args.out,
@@ -316,8 +314,6 @@ def cmd_batch(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_INTERRUPTED
-    finally:
-        signal.signal(signal.SIGTERM, on_term)
     m = report.medians()
     say(f"results in {report.out}/ (index.html, summary.csv)")
     print(
@@ -418,6 +414,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
+    # A SIGTERM (a job runner's, ``timeout``'s) ends a command as Ctrl-C does: a fit writes its
+    # best result so far, a batch keeps its finished targets. Not SIGKILL: nothing can.
+    on_term = signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         return args.func(args)
     except KeyboardInterrupt:
@@ -426,6 +425,8 @@ def main(argv: list[str] | None = None) -> int:
     except HandshadowError as exc:
         print(f"handshadow: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    finally:
+        signal.signal(signal.SIGTERM, on_term)
 
 
 if __name__ == "__main__":
