@@ -4,7 +4,7 @@ success). It runs on `handshadow batch` (Dask), so it scales out with --workers 
 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
                         [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
-                        [--fits-only] [--no-forearm] [--lamp-distance M] [--hops N] [--attempts N]
+                        [--fits-only] [--no-forearm] [--lamp-distance M] [--hops N] [--attempts N] [--skip-attempts N]
 
 Prints one row per target as it finishes: the shadow's measures, the deepest penetration
 between or within the hands (pen, mm, exact on the meshes), whether the pose can be held
@@ -38,7 +38,7 @@ from scipy import ndimage
 
 from handshadow.batch import find_targets, run_batch
 from handshadow.errors import HandshadowError
-from handshadow.fit import FitConfig, attempts_of, hops_of
+from handshadow.fit import FitConfig, attempts_of, hops_of, skipped_attempts
 from handshadow.hands.penetration import TOLERANCE_MM as PENETRATION_TOLERANCE_MM
 from handshadow.scene import FIT_LAMP_TO_WALL_M
 
@@ -72,6 +72,13 @@ def main() -> None:
     )
     parser.add_argument("--hops", type=int, default=None, help="hops from a near miss (handshadow fit --hops)")
     parser.add_argument("--attempts", type=int, default=None, help="fresh starts (handshadow fit --attempts)")
+    parser.add_argument(
+        "--skip-attempts",
+        type=int,
+        default=0,
+        help="run only the attempts after the first N (their starts left out as if searched): a further"
+        " attempt measured on an earlier run's failures alone",
+    )
     parser.add_argument("--workers", type=int, default=1, help="local Dask workers, each fitting one target at a time")
     parser.add_argument("--threads-per-worker", type=int, help="torch threads per worker (default: cores / workers)")
     parser.add_argument("--scheduler", help="an existing Dask cluster instead of a local one")
@@ -109,9 +116,10 @@ def main() -> None:
         lamp_to_wall_m=args.lamp_distance,
         hops=args.hops,
         attempts=args.attempts,
+        skip_attempts=args.skip_attempts,
     )
     try:  # a bad count fails here in one line, not in every worker
-        attempts_of(config), hops_of(config)
+        attempts_of(config), hops_of(config), skipped_attempts(config)
     except HandshadowError as e:
         parser.error(str(e))
     if args.fits_only:

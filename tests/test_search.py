@@ -347,6 +347,11 @@ def test_a_failed_fit_starts_afresh_with_fresh_starts_and_keeps_the_better(monke
     better = min(range(2), key=lambda k: fit_module.result_key(attempts[k]))
     assert both.posed.fit["attempt"] == better + 1 and both.score == attempts[better].score
     assert np.array_equal(both.shadow, attempts[better].shadow)
+    # With the first attempt skipped, the second runs alone and gives its result to the bit
+    # (a benchmark measures a further attempt on an earlier run's failures).
+    skipped = fit_frame(target, dataclasses.replace(base, attempts=2, skip_attempts=1))
+    assert skipped.posed.fit["attempt"] == 2 and skipped.posed.fit["attempts_run"] == 1
+    assert np.array_equal(skipped.shadow, attempts[1].shadow) and skipped.score == attempts[1].score
     # A success ends the attempts: the first attempt's result, scored as passing, is kept.
     monkeypatch.setattr(fit_module.FitResult, "success", property(lambda self: True))
     once = fit_frame(target, dataclasses.replace(base, attempts=3))

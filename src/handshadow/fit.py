@@ -110,7 +110,10 @@ class FitConfig:
     the wall (scene.LAMP_TO_WALL_RANGE_M; one view only; None: scene.FIT_LAMP_TO_WALL_M for one
     view, scene.LAMP_TO_WALL_M for two); the frame on the wall keeps its size. hops: from a
     result within reach of the success test (search.config.Hops.reach_hd95), the attempt's
-    fine stages again from jittered copies (search.hops; None: HOPS of the quality, 0: none)."""
+    fine stages again from jittered copies (search.hops; None: HOPS of the quality, 0: none).
+    skip_attempts: the first attempts not run, their library and atlas starts left out as if
+    they had been searched (a benchmark measures a further attempt on an earlier run's
+    failures alone: attempts are deterministic, and a later one only adds to the earlier)."""
 
     hands: str = "auto"
     size: int = 256
@@ -132,6 +135,7 @@ class FitConfig:
     attempts: int | None = None
     lamp_to_wall_m: float | None = None
     hops: int | None = None
+    skip_attempts: int = 0
 
 
 @dataclasses.dataclass
@@ -344,7 +348,9 @@ def fit_frame(
     limit = config.time_limit_s or None  # seconds; None or 0: no limit
     best, interrupted, runs, steps = None, False, 0, 0
     tried: dict[int, set] = {}  # per hand count, the library and atlas starts searched so far
-    for k in range(attempts):
+    for k in range(skipped_attempts(config)):
+        _skip_attempt(targets, scenes, dataclasses.replace(config, seed=config.seed + k), extra_starts, anchor, tried)
+    for k in range(config.skip_attempts, attempts):
         left = None if limit is None else limit - (time.perf_counter() - t0)
         if best is not None and left is not None and left <= 0:
             break
@@ -388,6 +394,14 @@ def attempts_of(config: FitConfig) -> int:
     return attempts
 
 
+def skipped_attempts(config: FitConfig) -> int:
+    """config.skip_attempts, if it leaves an attempt to run (0 to attempts_of(config) - 1)."""
+    skip, attempts = config.skip_attempts, attempts_of(config)
+    if isinstance(skip, bool) or not isinstance(skip, int) or not 0 <= skip < attempts:
+        raise HandshadowError(f"skip_attempts must be a whole number from 0 to {attempts - 1}, got {skip!r}")
+    return skip
+
+
 MAX_SEED = 2**32 - 1
 
 
@@ -411,6 +425,13 @@ def result_key(result: FitResult) -> tuple:
     success and blend (metrics.ViewScores.key; with one view metrics.rank_key)."""
     scores = ViewScores(tuple(v.score for v in result.views), tuple(v.weight for v in result.views))
     return (not result.performable, *scores.key())
+
+
+def _skip_attempt(targets, scenes, config, extra_starts, anchor, tried: dict[int, set]) -> None:
+    """An attempt not run (FitConfig.skip_attempts): only its starts are chosen, and its library
+    and atlas starts added to ``tried`` as the attempt would have added them."""
+    for n in hand_counts(config, extra_starts if extra_starts is not None else anchor):
+        _prepare(targets, scenes, n, config, extra_starts, anchor, tried.setdefault(n, set()))
 
 
 def _attempt(targets, scenes, config, progress, extra_starts, anchor, stop, limit, tried=None) -> FitResult:
@@ -640,6 +661,16 @@ def _search(
     targets, scenes, n_hands, config, progress, deadline, extra_starts=None, anchor=None, stop=None, tried=None
 ):
     t0 = time.perf_counter()  # the deadline (seconds) counts the set-up too
+    problem, starts, stages = _prepare(targets, scenes, n_hands, config, extra_starts, anchor, tried)
+    if deadline is not None:
+        deadline -= time.perf_counter() - t0
+    res = run_stages(problem, starts, stages, progress=progress, deadline_s=deadline, stop=stop)
+    return HandCountFit(n_hands, ["right", "left"][:n_hands], problem, res)
+
+
+def _prepare(targets, scenes, n_hands, config, extra_starts, anchor, tried=None) -> tuple[Problem, PoseBatch, list]:
+    """A search's problem, starts and stages for a hand count; the starts' library and atlas
+    entries are added to ``tried`` (and those already in it left out, SKIP_TRIED)."""
     sides = ["right", "left"][:n_hands]
     weights = config.view_weights or (1.0,) * len(targets)
     more = [ViewTarget(s, t, w / weights[0]) for s, t, w in zip(scenes[1:], targets[1:], weights[1:])]
@@ -655,10 +686,7 @@ def _search(
     skip = frozenset(tried) if SKIP_TRIED else frozenset()
     starts = choose_starts(problem, sides, n_random, n_keep, rng, extra_starts, config.exclude_library, atlas, skip)
     tried.update(start_key(o) for o in starts.origins or [] if start_key(o) is not None)
-    if deadline is not None:
-        deadline -= time.perf_counter() - t0
-    res = run_stages(problem, starts, stages, progress=progress, deadline_s=deadline, stop=stop)
-    return HandCountFit(n_hands, sides, problem, res)
+    return problem, starts, stages
 
 
 def make_problem(
