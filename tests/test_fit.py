@@ -218,7 +218,8 @@ def test_frame_recorder_counts_over_both_searches_of_hands_auto_and_every_attemp
 
 
 @pytest.mark.parametrize(
-    ("field", "value", "words"), [("attempts", 0, "attempt"), ("hops", -1, "hops"), ("skip_attempts", 1, "skip_attempts")]
+    ("field", "value", "words"),
+    [("attempts", 0, "attempt"), ("hops", -1, "hops"), ("skip_attempts", 1, "skip_attempts")],
 )
 def test_a_bad_count_from_python_fails_before_the_search(field, value, words, monkeypatch):
     import handshadow.fit as fit_module
