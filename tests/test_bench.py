@@ -13,7 +13,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench" / "fit.py"
 
 @pytest.mark.parametrize(
     "option, message",
-    [("--attempts=0", "at least one attempt"), ("--hops=-1", "negative"), ("--skip-attempts=3", "skip_attempts")],
+    [("--attempts=0", "at least one attempt"), ("--hops=-1", "negative"), ("--skip-attempts=5", "skip_attempts")],
 )
 def test_the_fit_bench_refuses_a_bad_count_in_one_line(tmp_path, option, message):
     frame = np.zeros((32, 32), np.uint8)

@@ -239,7 +239,7 @@ def _add_fit_options(
         "--attempts",
         type=int,
         help="fresh starts (seed, seed+1, ...) while the result fails the success test, the best kept "
-        "(default: 1 fast, 3 default, 4 best)",
+        "(default: 1 fast, 5 default, 6 best)",
     )
     p.add_argument(
         "--hops",

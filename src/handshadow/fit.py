@@ -80,8 +80,10 @@ VIEWS_POLISH_ROUNDS = {"fast": (2, 0, 1), "default": (4, 8, 3), "best": (6, 12, 
 # (other random starts, other jitter) and from library and atlas starts not searched yet, and
 # the best result is kept. On the 64 of 95 HSP targets that the first attempt failed, a second
 # turned 10 into successes (9 with the next seed alone); on the 35 that two attempts failed
-# (2026-12-03), a third turned 5 into successes (README, Fitting).
-ATTEMPTS = {"fast": 1, "default": 3, "best": 4}
+# (2026-12-03), a third turned 5 into successes; on the 30 that three failed, a fourth 3 and a
+# fifth 3 of the 27 left, a sixth 1 of 24 (2026-12-04, README, Fitting). A pass costs no more;
+# a failure costs every attempt.
+ATTEMPTS = {"fast": 1, "default": 5, "best": 6}
 SKIP_TRIED = True  # a later attempt leaves out the library and atlas starts an earlier one searched
 # Hops an attempt may make from a result within reach after its finishing steps (search.hops,
 # config.Hops.reach_hd95): its fine stages again from harder-jittered copies, separated and
