@@ -681,3 +681,19 @@ def test_a_hops_last_copies_move_only_the_fingers_near_the_failing_outline(monke
     assert torch.equal(focused.wrist_rad, start.wrist_rad.expand_as(focused.wrist_rad))
     plain = copies.select(slice(1, -Hops().focused))
     assert ((plain.pose_rad - start.pose_rad).abs().amax((0, 2)) > 0).all()  # the others move all over
+
+
+def test_the_starts_stay_diverse_at_most_two_per_library_pose_and_a_share_from_the_atlas():
+    from handshadow.poses import Origin
+    from handshadow.search.starts import ATLAS_SHARE, PER_LIBRARY_POSE, _pick_diverse
+
+    # Best first: four of one library pose, then atlas entries, then random hands.
+    origins = [Origin("library", "dog")] * 4 + [Origin("atlas", str(k)) for k in range(10)] + [Origin("random")] * 10
+    order = list(range(len(origins)))
+    n_keep = 12
+    picked = _pick_diverse(order, origins, n_keep, picked=[23])  # a given start comes first and counts
+    kinds = [origins[i].kind for i in picked]
+    assert picked[0] == 23 and len(picked) == n_keep and len(set(picked)) == n_keep
+    assert kinds.count("library") == PER_LIBRARY_POSE and picked[1:3] == [0, 1]
+    assert kinds.count("atlas") == round(ATLAS_SHARE * n_keep)
+    assert all(origins[i].kind == "random" for i in picked[3 + round(ATLAS_SHARE * n_keep) :])

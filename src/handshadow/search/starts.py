@@ -320,13 +320,23 @@ def choose_starts(
         held = held & ~tried
     order = torch.argsort(overlap - 2.0 * (~held).to(overlap.dtype), descending=True).tolist()
     picked = list(range(cand.batch - given.batch, cand.batch)) if given is not None else []  # aligned
+    picked = _pick_diverse(order, moved.origins, n_keep, picked)
+    log.info("starts: %s", ", ".join(f"{moved.origins[i]} {float(overlap[i]):.2f}" for i in picked[:8]))
+    chosen = moved.select(picked)
+    return PoseBatch.cat([cand.select(slice(cand.batch - given.batch, None)), chosen]) if given is not None else chosen
+
+
+def _pick_diverse(order: list[int], origins: list[Origin], n_keep: int, picked: list[int]) -> list[int]:
+    """``picked`` followed by candidates in ``order`` (best first) up to ``n_keep`` in all, at
+    most PER_LIBRARY_POSE from any one library pose and ATLAS_SHARE of n_keep from the atlas."""
+    picked = list(picked)
     per_pose: dict[str, int] = {}
     for i in order:
         if len(picked) >= n_keep:
             break
         if i in picked:
             continue
-        o = moved.origins[i]
+        o = origins[i]
         source = o.name if o.kind == "library" else o.kind if o.kind == "atlas" else None
         cap = PER_LIBRARY_POSE if o.kind == "library" else round(ATLAS_SHARE * n_keep)
         if source is not None:
@@ -334,9 +344,7 @@ def choose_starts(
                 continue
             per_pose[source] = per_pose.get(source, 0) + 1
         picked.append(i)
-    log.info("starts: %s", ", ".join(f"{moved.origins[i]} {float(overlap[i]):.2f}" for i in picked[:8]))
-    chosen = moved.select(picked)
-    return PoseBatch.cat([cand.select(slice(cand.batch - given.batch, None)), chosen]) if given is not None else chosen
+    return picked
 
 
 def start_key(origin) -> tuple | None:
