@@ -117,6 +117,41 @@ def test_missing_parts_are_found_where_they_are_and_named_thin():
     assert parts_text([], []) == "nothing missing"
 
 
+def test_a_shadow_short_of_the_success_test_says_which_bars_it_misses_and_where():
+    from handshadow.guide import shortfall_line
+    from handshadow.metrics import score, thin_parts, uncovered_parts
+
+    target = np.zeros((100, 100), bool)
+    target[40:90, 30:70] = True  # a body
+    target[10:40, 68:78] = True  # an ear, top right
+    shadow = target.copy()
+    shadow[10:40, 68:78] = False  # the ear missed: its outline is 30 px off, far past the HD95 bar
+    thin = thin_parts(target)
+    parts = uncovered_parts(target, shadow, target, thin), uncovered_parts(shadow, target, target, thin)
+    s = score(shadow, target, thin)
+    assert s.iou >= 0.8 and s.thin_recall < 0.6 and s.hd95 > 0.03
+    line = shortfall_line(s, *parts)
+    assert line.startswith(
+        f"Short of the success test (thin parts {s.thin_recall:.2f} under 0.6; HD95 {s.hd95:.3f} over 0.03"
+    )
+    assert "IoU" not in line and "missing a part at the top right" in line and "extra shadow" not in line
+    assert shortfall_line(score(target, target, thin), [], []) is None  # a success says nothing more
+
+
+def test_guide_lines_are_wrapped_to_the_picture_and_keep_every_word():
+    from PIL import ImageFont
+
+    from handshadow.guide import wrapped
+
+    font = ImageFont.load_default()
+    long = "Short of the success test " + " ".join(f"word{k}" for k in range(60))
+    lines = wrapped([long, "  Spread the fingers wide."], 300, font)
+    assert len(lines) > 3 and lines[-1] == "  Spread the fingers wide."
+    assert all(font.getlength(line) <= 300 for line in lines)
+    assert " ".join(line.strip() for line in lines[:-1]).split() == long.split()
+    assert all(line.startswith("  ") for line in lines[1:-1])  # a continuation is indented
+
+
 def test_far_outline_marks_where_the_outline_fails_the_hd95_bar():
     # The bar is 0.03 of the frame height: 3 px here.
     target = np.zeros((100, 100), bool)

@@ -6,12 +6,13 @@ per view how well its shadow came out and which parts of its target are missing.
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Sequence
 
 import numpy as np
 
 from handshadow.hands.rig import FINGERS
-from handshadow.metrics import FitScore, Part
+from handshadow.metrics import SUCCESS_HD95, SUCCESS_IOU, SUCCESS_THIN, FitScore, Part
 from handshadow.poses import HandPose
 from handshadow.scene import Scene
 
@@ -92,6 +93,17 @@ def describe(hands: list[HandPose], scene: Scene) -> list[str]:
     return out
 
 
+def wrapped(lines: Sequence[str], width_px: int, font) -> list[str]:
+    """Lines broken at spaces to fit ``width_px`` pixels in ``font`` (a PIL font); a line's
+    continuation is indented as far as the line is, and by two spaces more."""
+    per_char = max(font.getlength("abcdefghijklmnopqrstuvwxyz ") / 27, 1.0)
+    out = []
+    for line in lines:
+        indent = " " * (len(line) - len(line.lstrip(" ")))
+        out += textwrap.wrap(line, max(int(width_px / per_char), 20), subsequent_indent=indent + "  ") or [line]
+    return out
+
+
 def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) -> np.ndarray:
     """The performer's view on the left, the shadow over the target as an inset, and the
     instructions below. All uint8 RGB."""
@@ -101,13 +113,14 @@ def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) 
     inset = Image.fromarray(shadow_overlay).resize(
         (w // 3, w // 3 * shadow_overlay.shape[0] // shadow_overlay.shape[1])
     )
+    font = ImageFont.load_default()
+    lines = wrapped(lines, w - 20, font)
     text_h = 18 * (len(lines) + 2)
     canvas = Image.new("RGB", (w, h + text_h), "white")
     canvas.paste(Image.fromarray(view), (0, 0))
     canvas.paste(inset, (w - inset.width - 6, 6))
     draw = ImageDraw.Draw(canvas)
     draw.rectangle([w - inset.width - 7, 5, w - 6, 6 + inset.height], outline=(120, 120, 120))
-    font = ImageFont.load_default()
     draw.text((8, 6), "What you see from behind the lamp", fill=(40, 40, 40), font=font)
     draw.text((w - inset.width - 6, inset.height + 10), "shadow vs target", fill=(90, 90, 90), font=font)
     y = h + 8
@@ -198,6 +211,24 @@ def parts_text(missing: Sequence[Part], extra: Sequence[Part]) -> str:
     return "; ".join(said) if said else "nothing missing"
 
 
+def shortfall_line(s: FitScore, missing: Sequence[Part], extra: Sequence[Part]) -> str | None:
+    """For a shadow short of the success test: which of its bars it misses and which target
+    parts the hands did not make (and where they cast shadow beyond the target), in words;
+    None for a shadow that passes."""
+    if s.success:
+        return None
+    missed = []
+    if s.iou < SUCCESS_IOU:
+        missed.append(f"IoU {s.iou:.3f} under {SUCCESS_IOU:g}")
+    if s.thin_recall < SUCCESS_THIN:
+        missed.append(f"thin parts {s.thin_recall:.2f} under {SUCCESS_THIN:g}")
+    if s.hd95 > SUCCESS_HD95:
+        missed.append(f"HD95 {s.hd95:.3f} over {SUCCESS_HD95:g}: the outline strays")
+    found = parts_text(missing, extra) if missing or extra else "no part beyond slivers along the outline"
+    where = "Where the shadow differs (share of the target's area)"
+    return f"Short of the success test ({'; '.join(missed)}). {where}: {found}."
+
+
 def view_lines(scores: Sequence[FitScore], parts: Sequence[tuple[list[Part], list[Part]]], weights) -> list[str]:
     """Per view how well its shadow came out and which target parts it misses (shares of the
     target's area), then the trade-off when the views could not all be met."""
@@ -233,6 +264,7 @@ def guide_views_image(
     h, w = view.shape[:2]
     width = w + plan.shape[1]
     tile = min(GUIDE_TILE_PX, width // len(overlays) - 12)
+    lines = wrapped(lines, width - 20, ImageFont.load_default())
     canvas = Image.new("RGB", (width, h + tile + 30 + 18 * (len(lines) + 2)), "white")
     canvas.paste(Image.fromarray(view), (0, 0))
     canvas.paste(Image.fromarray(plan), (w, 0))

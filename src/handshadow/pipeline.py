@@ -25,7 +25,7 @@ from handshadow.export.meshes import write_glb, write_obj
 from handshadow.export.pictures import performer_framing, performer_view, plan_picture, scene_picture
 from handshadow.export.plots import path_plot
 from handshadow.fit import FitConfig, FitResult, fit_frame, resolve_device, schedule, view_scenes
-from handshadow.guide import describe, guide_image, guide_views_image, lamp_lines, view_lines
+from handshadow.guide import describe, guide_image, guide_views_image, lamp_lines, shortfall_line, view_lines
 from handshadow.hands import load_hand
 from handshadow.hands.posed import PosedMesh, cast_shadows
 from handshadow.interpolate import PathReport, morph_targets, refine_path, report, straight_path
@@ -210,14 +210,19 @@ def fit_to_folder(
 
 
 def _guide(result: FitResult) -> tuple[list[str], np.ndarray]:
-    """The instruction lines and guide.png of a fit: how to hold the hands; with several
-    views also where each lamp goes and how each shadow came out, and a plan of the room."""
+    """The instruction lines and guide.png of a fit: how to hold the hands, after a word on
+    what the shadow misses when it falls short of the success test (guide.shortfall_line);
+    with several views also where each lamp goes and how each shadow came out, and a plan of
+    the room."""
     posed = result.posed
     lines = describe(list(posed.hands), posed.scene)
     hands = [(m.side, m.vertices, m.faces) for m in result.meshes]
     view = performer_view(posed.scene, hands, size=(560, 560))
     overlays = [overlay_image(v.target, v.shadow) for v in result.views]
     if len(result.views) == 1:
+        v = result.views[0]
+        short = shortfall_line(v.score, v.missing, v.extra)
+        lines = lines if short is None else [short, *lines]
         return lines, guide_image(view, overlays[0], lines)
     vertices = np.concatenate([m.vertices for m in result.meshes])
     lines = lines + lamp_lines(posed.views, vertices.mean(0)) + result_lines(result)
