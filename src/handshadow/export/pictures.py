@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -125,24 +126,46 @@ def performer_view(
     these hands' own. Returns (H, W, 3) uint8."""
     meshes = [ViewMesh(v, f, color=HAND_COLORS.get(side, SKIN)) for side, v, f in hands]
     target, distance = framing if framing is not None else performer_framing([v for _, v, _ in hands], scene)
-    normal = np.asarray(scene.wall.normal, float)
-    up = up_dir(scene)
-    eye = target + normal * distance + up * 0.25 * distance
-    camera = Camera(tuple(eye), tuple(target), tuple(up), fov_deg=45.0, width=size[0], height=size[1])
+    eye = performer_eye(target, distance, scene)
+    camera = Camera(
+        tuple(eye), tuple(target), tuple(up_dir(scene)), fov_deg=PERFORMER_FOV_DEG, width=size[0], height=size[1]
+    )
     return render_view(meshes, camera, background=(1.0, 1.0, 1.0), supersample=supersample)
+
+
+PERFORMER_FOV_DEG = 45.0  # the performer view's vertical field of view
+PERFORMER_FILL = 0.9  # the share of the half-view that the farthest-out vertex may reach
+PERFORMER_DISTANCES_M = np.geomspace(0.45, 12.0, 200)  # the camera distances the framing tries
+PERFORMER_RAISE = 0.25  # the camera stands this share of its distance above the hands' centre
+
+
+def performer_eye(centre: np.ndarray, distance: float, scene: Scene) -> np.ndarray:
+    """The performer camera's position (3,): ``distance`` metres from ``centre`` toward the
+    lamp along the wall's normal, raised by PERFORMER_RAISE of it."""
+    return centre + np.asarray(scene.wall.normal, float) * distance + up_dir(scene) * PERFORMER_RAISE * distance
 
 
 def performer_framing(vertex_sets: list[np.ndarray], scene: Scene) -> tuple[np.ndarray, float]:
     """Where the performer's camera looks and from how far (metres): the median of the
-    vertices (V, 3) of all sets, seen from far enough that 90 % of them fit across the view,
-    beyond the depth of what reaches toward the lamp (a forearm pointing at it)."""
+    vertices (V, 3) of all sets, from the nearest of PERFORMER_DISTANCES_M at which every
+    vertex lies in front of the camera and within PERFORMER_FILL of the view's half-height,
+    as the camera projects it (a forearm reaching toward the lamp is near the camera and
+    needs the room; the farthest distance when none fits)."""
     pts = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v in vertex_sets])
     centre = np.median(pts, axis=0)
-    normal = np.asarray(scene.wall.normal, float)
-    d = pts - centre
-    depth = d @ normal
-    across = np.linalg.norm(d - np.outer(depth, normal), axis=1)
-    return centre, max(0.45, 3.2 * float(np.percentile(across, 90)) + max(0.0, float(np.percentile(depth, 90))))
+    half = math.tan(math.radians(PERFORMER_FOV_DEG / 2)) * PERFORMER_FILL
+    up = up_dir(scene)
+    for distance in PERFORMER_DISTANCES_M:
+        eye = performer_eye(centre, float(distance), scene)
+        forward = (centre - eye) / np.linalg.norm(centre - eye)
+        right = np.cross(forward, up)
+        right /= np.linalg.norm(right)
+        true_up = np.cross(right, forward)
+        d = pts - eye
+        z = d @ forward
+        if z.min() > 0 and np.all(np.maximum(np.abs(d @ right), np.abs(d @ true_up)) <= half * z):
+            return centre, float(distance)
+    return centre, float(PERFORMER_DISTANCES_M[-1])
 
 
 def up_dir(scene: Scene) -> np.ndarray:
