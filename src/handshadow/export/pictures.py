@@ -146,13 +146,13 @@ def performer_eye(centre: np.ndarray, distance: float, scene: Scene) -> np.ndarr
 
 
 def performer_framing(vertex_sets: list[np.ndarray], scene: Scene) -> tuple[np.ndarray, float]:
-    """Where the performer's camera looks and from how far (metres): the median of the
-    vertices (V, 3) of all sets, from the nearest of PERFORMER_DISTANCES_M at which every
+    """Where the performer's camera looks and from how far (metres): the centre of the box
+    around the vertices (V, 3) of all sets, from the nearest of PERFORMER_DISTANCES_M at which every
     vertex lies in front of the camera and within PERFORMER_FILL of the view's half-height,
     as the camera projects it (a forearm reaching toward the lamp is near the camera and
     needs the room; the farthest distance when none fits)."""
     pts = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v in vertex_sets])
-    centre = np.median(pts, axis=0)
+    centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
     half = math.tan(math.radians(PERFORMER_FOV_DEG / 2)) * PERFORMER_FILL
     up = up_dir(scene)
     for distance in PERFORMER_DISTANCES_M:
