@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -126,10 +125,7 @@ def performer_view(
     these hands' own. Returns (H, W, 3) uint8."""
     meshes = [ViewMesh(v, f, color=HAND_COLORS.get(side, SKIN)) for side, v, f in hands]
     target, distance = framing if framing is not None else performer_framing([v for _, v, _ in hands], scene)
-    eye = performer_eye(target, distance, scene)
-    camera = Camera(
-        tuple(eye), tuple(target), tuple(up_dir(scene)), fov_deg=PERFORMER_FOV_DEG, width=size[0], height=size[1]
-    )
+    camera = performer_camera(target, distance, scene, size)
     return render_view(meshes, camera, background=(1.0, 1.0, 1.0), supersample=supersample)
 
 
@@ -139,31 +135,26 @@ PERFORMER_DISTANCES_M = np.geomspace(0.45, 12.0, 200)  # the camera distances th
 PERFORMER_RAISE = 0.25  # the camera stands this share of its distance above the hands' centre
 
 
-def performer_eye(centre: np.ndarray, distance: float, scene: Scene) -> np.ndarray:
-    """The performer camera's position (3,): ``distance`` metres from ``centre`` toward the
-    lamp along the wall's normal, raised by PERFORMER_RAISE of it."""
-    return centre + np.asarray(scene.wall.normal, float) * distance + up_dir(scene) * PERFORMER_RAISE * distance
+def performer_camera(centre: np.ndarray, distance: float, scene: Scene, size: tuple[int, int] = (2, 2)) -> Camera:
+    """The performer's camera: ``distance`` metres from ``centre`` toward the lamp along the
+    wall's normal, raised by PERFORMER_RAISE of it, looking at ``centre``; size (W, H) pixels."""
+    up = up_dir(scene)
+    eye = centre + np.asarray(scene.wall.normal, float) * distance + up * PERFORMER_RAISE * distance
+    return Camera(tuple(eye), tuple(centre), tuple(up), fov_deg=PERFORMER_FOV_DEG, width=size[0], height=size[1])
 
 
 def performer_framing(vertex_sets: list[np.ndarray], scene: Scene) -> tuple[np.ndarray, float]:
     """Where the performer's camera looks and from how far (metres): the centre of the box
-    around the vertices (V, 3) of all sets, from the nearest of PERFORMER_DISTANCES_M at which every
-    vertex lies in front of the camera and within PERFORMER_FILL of the view's half-height,
-    as the camera projects it (a forearm reaching toward the lamp is near the camera and
-    needs the room; the farthest distance when none fits)."""
+    around the vertices (V, 3) of all sets, from the nearest of PERFORMER_DISTANCES_M at which
+    every vertex lies in front of the camera and within PERFORMER_FILL of the view's
+    half-height, as the camera projects it (a forearm reaching toward the lamp is near the
+    camera and needs the room; the farthest distance when none fits)."""
     pts = np.concatenate([np.asarray(v, float).reshape(-1, 3) for v in vertex_sets])
     centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
-    half = math.tan(math.radians(PERFORMER_FOV_DEG / 2)) * PERFORMER_FILL
-    up = up_dir(scene)
     for distance in PERFORMER_DISTANCES_M:
-        eye = performer_eye(centre, float(distance), scene)
-        forward = (centre - eye) / np.linalg.norm(centre - eye)
-        right = np.cross(forward, up)
-        right /= np.linalg.norm(right)
-        true_up = np.cross(right, forward)
-        d = pts - eye
-        z = d @ forward
-        if z.min() > 0 and np.all(np.maximum(np.abs(d @ right), np.abs(d @ true_up)) <= half * z):
+        # A 2 x 2-pixel view: pixel coordinates 1 +- 1 span its half-height either way.
+        xy, depth = performer_camera(centre, float(distance), scene).project(pts)
+        if depth.min() > 0 and np.abs(xy - 1.0).max() <= PERFORMER_FILL:
             return centre, float(distance)
     return centre, float(PERFORMER_DISTANCES_M[-1])
 
