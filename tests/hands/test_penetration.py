@@ -1,12 +1,20 @@
 """The exact penetration test on meshes: hand-made boxes, a hand pushed into the other at a
 known depth, fists, and the finishing step that parts a penetrating result."""
 
+import igl
 import numpy as np
 import pytest
 import torch
 import trimesh
 
-from handshadow.hands.penetration import TOLERANCE_MM, Hull, contact_penalty, hand_parts, penetration
+from handshadow.hands.penetration import (
+    TOLERANCE_MM,
+    Hull,
+    contact_penalty,
+    hand_parts,
+    penetration,
+    winding_inside,
+)
 
 
 def _box(size, centre):
@@ -44,6 +52,24 @@ def test_a_hull_holds_its_surface_but_not_the_empty_corners_of_its_axis_aligned_
     assert hull.holds(np.asarray(rod.sample(500, seed=0))).all()
     corner = np.asarray(rod.vertices).max(0)  # a corner of the axis-aligned box, far off the rod
     assert not hull.holds(corner[None])[0]
+
+
+def test_the_fast_inside_test_answers_as_the_exact_winding_number_near_and_far_from_the_skin(hands64):
+    right = hands64["right"]
+    out = right(right.rest_pose())
+    verts, faces = out.vertices[0].double().numpy(), right.faces.numpy()
+    rng = np.random.default_rng(0)
+    normals = trimesh.Trimesh(verts, faces, process=False).vertex_normals
+    # Points off every vertex along its normal, from 3 mm inside to 3 mm outside (where the
+    # approximation is least sure), and points scattered over and around the hand's box.
+    offsets = rng.uniform(-0.003, 0.003, len(verts))[:, None]
+    near = verts + offsets * normals
+    lo, hi = verts.min(0) - 0.02, verts.max(0) + 0.02
+    far = rng.uniform(lo, hi, (4000, 3))
+    points = np.concatenate([near, far])
+    exact = igl.winding_number(verts, faces, points) > 0.5
+    assert 0.2 < exact.mean() < 0.8  # both answers are well represented
+    assert np.array_equal(winding_inside(verts, faces, points), exact)
 
 
 @pytest.fixture(scope="module")
