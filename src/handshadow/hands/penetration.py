@@ -246,8 +246,9 @@ def winding_inside(verts: np.ndarray, tri: np.ndarray, points: np.ndarray) -> np
     """(N,) bool: which points (N, 3) lie inside the closed surface (verts (V, 3), tri (F, 3)):
     generalised winding number over one half. libigl's fast winding number (a tree of
     far-field expansions) decides every point whose value lies more than WINDING_UNSURE from
-    one half, the exact sum over all triangles the rest: the same answer as the exact test,
-    about twice as fast on a hand's vertices."""
+    one half, the exact sum over all triangles the rest. That is the exact test's answer
+    wherever the fast value strays less than WINDING_UNSURE (on recorded fits it strayed at
+    most 0.005), about twice as fast on a hand's vertices."""
     w = igl.fast_winding_number(verts, tri, points)
     unsure = np.abs(w - 0.5) < WINDING_UNSURE
     if unsure.any():
