@@ -163,8 +163,8 @@ class Problem:
         return v.levels[height]
 
     def pose(self, hands: list[HandPoseBatch]) -> list[HandOutput]:
-        """Posed hands, one HandOutput per slot."""
-        return [model(*h.args()) for model, h in zip(self.models, hands)]
+        """Posed hands, one HandOutput per slot, on the problem's device (hands from any device)."""
+        return [model(*h.to(self.device).args()) for model, h in zip(self.models, hands)]
 
     @torch.no_grad()
     def shadows(self, poses: PoseBatch, height: int | None = None, view: int = 0) -> torch.Tensor:
@@ -233,6 +233,7 @@ class Problem:
         """Per hypothesis, the arm rules (hands.arms) in every view: a forearm leads back when
         it does so from every view's wall, an elbow is out of the picture when it is out of
         every view's."""
+        poses = poses.to(self.device)
         outs = [(h, o) for h, o in zip(poses.hands, self.pose(poses.hands)) if o.forearm_points.shape[1]]
         if not outs:  # no forearms: nothing beyond the wrist to check
             return [ArmCheck((), (), 0.0, 1)] * poses.batch
