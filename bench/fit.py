@@ -60,7 +60,7 @@ def main() -> None:
     parser.add_argument("--quality", default="default", choices=["fast", "default", "best"])
     parser.add_argument("--names", help="comma-separated file stems to run (a subset)")
     parser.add_argument("--out", default="out/bench", help="folder for the results, contact sheet and rows")
-    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--device", default="auto", help="cpu, cuda or auto (default: CUDA when present)")
     parser.add_argument(
         "--no-forearm", action="store_true", help="hands without forearms (handshadow fit --no-forearm)"
     )

@@ -3,6 +3,10 @@ every target is the exact shadow of a random, anatomically valid, performable po
 hands (with forearms, or without with --no-forearm) at a random place between lamp and wall.
 
     python bench/recover.py [--n 40] [--seed 2026] [--no-forearm] [--quality default] [--out out/recover]
+                            [--part K/N]
+
+--part K/N fits only the targets k with k % N == K (all are still drawn, so each keeps its pose):
+N processes with K = 0 .. N-1, e.g. on one GPU, share the work; each writes rows-K-of-N.json.
 
 The poses come from their own generator (uniform joint angles within the limits, any
 orientation whose forearm leads back toward the lamp, hands within a person's reach), never
@@ -110,7 +114,14 @@ def main() -> None:
     parser.add_argument("--no-forearm", action="store_true")
     parser.add_argument("--quality", default="default", choices=["fast", "default", "best"])
     parser.add_argument("--out", default="out/recover")
+    parser.add_argument("--part", default="0/1", help="K/N: fit only targets k with k %% N == K")
     args = parser.parse_args()
+    try:
+        part, parts = (int(x) for x in args.part.split("/"))
+        assert 0 <= part < parts
+    except (ValueError, AssertionError):
+        raise SystemExit(f"--part must be K/N with 0 <= K < N, got {args.part!r}") from None
+    rows_file = "rows.json" if parts == 1 else f"rows-{part}-of-{parts}.json"
     out = Path(args.out)
     (out / "targets").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
@@ -122,6 +133,8 @@ def main() -> None:
     rows = []
     for k in range(args.n):
         truth, target = random_target(rng, forearm)
+        if k % parts != part:
+            continue
         name = f"pose{k:02d}"
         iio.imwrite(out / "targets" / f"{name}.png", mask_image(target))
         (out / "targets" / f"{name}.json").write_text(json.dumps(truth.to_json(), indent=1))
@@ -148,7 +161,7 @@ def main() -> None:
             f"{r['penetration_mm']:5.1f} {'yes' if result.performable else 'no':>4s} {r['hands']:5d} {seconds:6.1f}",
             flush=True,
         )
-        (out / "rows.json").write_text(json.dumps(rows, indent=1))
+        (out / rows_file).write_text(json.dumps(rows, indent=1))
     n = len(rows)
     print(
         f"SUMMARY n={n} success={sum(r['shadow_success'] for r in rows) / n:.3f} "
