@@ -239,24 +239,19 @@ class Problem:
             return [ArmCheck((), (), 0.0, 1)] * poses.batch
         elbows = torch.stack([o.forearm_points[:, -1] for _, o in outs], 1)  # (B, n, 3)
         wrists = torch.stack([h.translation for h, _ in outs], 1)
-        as_np = lambda t: t.cpu().double().numpy()  # noqa: E731
+        as_np = lambda t: t.detach().cpu().double().numpy()  # noqa: E731
+        per_view = []  # per view: elbow pixels (B, n, 2), elbow and wrist heights (B, n), all at once
+        for view in self.views:
+            xy, elbow_heights = view.scene.project(elbows)
+            _, wrist_heights = view.scene.project(wrists)
+            per_view.append((as_np(xy), as_np(elbow_heights), as_np(wrist_heights), view.scene.image))
+        elbows_np = as_np(elbows)
         found = []
         for k in range(poses.batch):
-            checks = []
-            for view in self.views:
-                xy, elbow_heights = view.scene.project(elbows[k])
-                _, wrist_heights = view.scene.project(wrists[k])
-                image = view.scene.image
-                checks.append(
-                    check_arms(
-                        as_np(xy),
-                        as_np(elbows[k]),
-                        as_np(elbow_heights),
-                        as_np(wrist_heights),
-                        image.height,
-                        image.width,
-                    )
-                )
+            checks = [
+                check_arms(xy[k], elbows_np[k], eh[k], wh[k], image.height, image.width)
+                for xy, eh, wh, image in per_view
+            ]
             back = tuple(all(c) for c in zip(*(x.leads_back for x in checks)))
             out = tuple(all(c) for c in zip(*(x.elbows_out for x in checks)))
             found.append(dataclasses.replace(checks[0], leads_back=back, elbows_out=out))
