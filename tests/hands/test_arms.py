@@ -47,3 +47,18 @@ def test_every_library_pose_has_arms_one_person_can_hold():
         poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in posed.hands])
         check = problem.arm_checks(poses)[0]
         assert check.holdable(), f"{name}: forearms lead back {check.leads_back}, {check.performers} performers"
+
+
+def test_forearm_points_alone_are_where_the_posed_hand_puts_them(hands64, rng):
+    """The arm checks place the forearm without posing the hand's vertices: the same points."""
+    from tests.conftest import random_pose, random_rotation
+
+    for side, hand in hands64.items():
+        pose = random_pose(rng, 4)
+        rotation = torch.cat([random_rotation(rng, 90) for _ in range(4)])
+        translation = torch.as_tensor(rng.normal(0, 0.2, (4, 3)))
+        wrist = torch.as_tensor(rng.uniform(-0.8, 0.8, (4, 2)))
+        for args in ((rotation, translation, wrist), (None, translation, None), (rotation, None, wrist)):
+            posed = hand(pose, *args).forearm_points
+            assert posed.shape[1] > 1, side
+            assert torch.equal(hand.forearm_points(*args), posed), (side, [a is None for a in args])

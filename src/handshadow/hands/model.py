@@ -151,6 +151,31 @@ class HandModel(torch.nn.Module):
             forearm_points = kinematics.apply_rigid(forearm_points, rotation, translation)
         return HandOutput(verts, self.faces, keypoints, bone_r, bone_t, forearm_points)
 
+    def forearm_points(
+        self,
+        rotation: torch.Tensor | None = None,
+        translation: torch.Tensor | None = None,
+        wrist_rad: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """(B, P, 3) the forearm's axis points, wrist to elbow, as :meth:`forward` places them
+        (HandOutput.forearm_points), without posing the hand's vertices: the forearm follows
+        the wrist alone. Arguments as forward's; at least one of them gives the batch.
+        (B, 0, 3) without a forearm."""
+        given = [t for t in (rotation, translation, wrist_rad) if t is not None]
+        if not given:
+            raise ValueError("forearm_points needs a rotation, translation or wrist angles for its batch")
+        batch = given[0].shape[0]
+        points = self.forearm_axis_points.expand(batch, -1, -1)
+        if self.forearm_bone is not None:
+            fr, ft = self._forearm_transform(wrist_rad, batch, points)
+            points = points @ fr.transpose(-1, -2) + ft[:, None]
+        if rotation is not None or translation is not None:
+            eye = torch.eye(3, dtype=points.dtype, device=points.device).expand(batch, 3, 3)
+            rotation = eye if rotation is None else rotation
+            translation = points.new_zeros(batch, 3) if translation is None else translation
+            points = kinematics.apply_rigid(points, rotation, translation)
+        return points
+
     def _forearm_transform(self, wrist_rad, batch, like) -> tuple[torch.Tensor, torch.Tensor]:
         """The forearm bone's rotation (B, 3, 3) and translation (B, 3) in the hand frame: the
         inverse of the wrist's motion, about the wrist centre. Flexion turns about the hand's x

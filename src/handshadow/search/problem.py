@@ -234,11 +234,12 @@ class Problem:
         it does so from every view's wall, an elbow is out of the picture when it is out of
         every view's."""
         poses = poses.to(self.device)
-        outs = [(h, o) for h, o in zip(poses.hands, self.pose(poses.hands)) if o.forearm_points.shape[1]]
-        if not outs:  # no forearms: nothing beyond the wrist to check
+        arms = [(h, m.forearm_points(h.rotation, h.translation, h.wrist_rad)) for m, h in zip(self.models, poses.hands)]
+        arms = [(h, points) for h, points in arms if points.shape[1]]
+        if not arms:  # no forearms: nothing beyond the wrist to check
             return [ArmCheck((), (), 0.0, 1)] * poses.batch
-        elbows = torch.stack([o.forearm_points[:, -1] for _, o in outs], 1)  # (B, n, 3)
-        wrists = torch.stack([h.translation for h, _ in outs], 1)
+        elbows = torch.stack([points[:, -1] for _, points in arms], 1)  # (B, n, 3)
+        wrists = torch.stack([h.translation for h, _ in arms], 1)
         as_np = lambda t: t.detach().cpu().double().numpy()  # noqa: E731
         per_view = []  # per view: elbow pixels (B, n, 2), elbow and wrist heights (B, n), all at once
         for view in self.views:
