@@ -30,33 +30,28 @@ from torch.overrides import TorchFunctionMode
 CUDA = torch.device("cuda", 0)
 
 
-class SimulatedCuda(torch.Tensor):
+class _OnCuda:
+    """What makes a CPU tensor read as one on the GPU."""
+
+    _simulated_cuda = True
+
+    @property
+    def device(self) -> torch.device:
+        return CUDA
+
+    @property
+    def is_cuda(self) -> bool:
+        return True
+
+
+class SimulatedCuda(_OnCuda, torch.Tensor):
     """A CPU tensor that stands for one on the GPU (see the module's docstring)."""
 
     __torch_function__ = torch._C._disabled_torch_function_impl
-    _simulated_cuda = True
-
-    @property
-    def device(self) -> torch.device:  # type: ignore[override]
-        return CUDA
-
-    @property
-    def is_cuda(self) -> bool:  # type: ignore[override]
-        return True
 
 
-class SimulatedCudaParameter(torch.nn.Parameter):
+class SimulatedCudaParameter(_OnCuda, torch.nn.Parameter):
     """A parameter on the simulated GPU."""
-
-    _simulated_cuda = True
-
-    @property
-    def device(self) -> torch.device:  # type: ignore[override]
-        return CUDA
-
-    @property
-    def is_cuda(self) -> bool:  # type: ignore[override]
-        return True
 
 
 def on_cuda(t) -> bool:
