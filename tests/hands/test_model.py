@@ -6,7 +6,12 @@ import torch
 import trimesh
 
 from handshadow.hands import JOINT_NAMES, load_hand
-from handshadow.hands.kinematics import anatomical_rotations, rotations_to_anatomical
+from handshadow.hands.kinematics import (
+    anatomical_rotations,
+    apply_rigid,
+    linear_blend_skinning,
+    rotations_to_anatomical,
+)
 from tests.conftest import random_pose, random_rotation
 
 FINGER_JOINTS = {
@@ -90,6 +95,25 @@ def test_batch_matches_single_and_gradients_flow(hands64, rng):
         assert torch.allclose(single.vertices[0], out.vertices[b], atol=1e-12)
     out.vertices.sum().backward()
     assert torch.isfinite(pose.grad).all() and pose.grad.abs().sum() > 0
+
+
+def test_posing_in_one_matrix_product_equals_blending_then_moving(hands64, rng):
+    """The world-frame vertices come from one skinning pass with the global rotation and
+    translation folded into the bones; they equal skinning in the hand frame (the per-vertex
+    blend form, taken for a batch of rest shapes) and then moving the hand rigidly."""
+    hand = hands64["right"]
+    pose = random_pose(rng, batch=4)
+    rot = torch.cat([random_rotation(rng, 150.0) for _ in range(4)])
+    trans = torch.randn(4, 3, dtype=torch.float64)
+    wrist = torch.as_tensor(rng.uniform(-0.6, 0.6, (4, 2)))
+    out = hand(pose, rot, trans, wrist)
+    local = hand(pose, wrist_rad=wrist)
+    rest = hand.rest_vertices.expand(4, -1, -1)  # a batch of rest shapes takes the blend form
+    blended = linear_blend_skinning(rest, hand.skin_weights, local.bone_rotations, local.bone_translations)
+    assert torch.allclose(blended, local.vertices, atol=1e-12)
+    assert torch.allclose(apply_rigid(blended, rot, trans), out.vertices, atol=1e-12)
+    assert torch.allclose(apply_rigid(local.keypoints, rot, trans), out.keypoints, atol=1e-12)
+    assert torch.equal(out.bone_rotations, local.bone_rotations)  # bones stay in the hand frame
 
 
 def test_anatomical_angles_round_trip(hands64, rng):

@@ -131,24 +131,29 @@ class HandModel(torch.nn.Module):
             bone_r = torch.cat([bone_r, fr[:, None]], 1)
             bone_t = torch.cat([bone_t, ft[:, None]], 1)
             forearm_points = forearm_points @ fr.transpose(-1, -2) + ft[:, None]
-        verts = kinematics.linear_blend_skinning(rest, self.skin_weights, bone_r, bone_t)
+        # The global rotation and translation go into the bones' transforms (the skin weights
+        # sum to 1 per vertex), so the vertices are posed in the world frame in one pass.
+        world_r, world_t = bone_r, bone_t
+        if rotation is not None or translation is not None:
+            eye = torch.eye(3, dtype=bone_t.dtype, device=bone_t.device).expand(batch, 3, 3)
+            rotation = eye if rotation is None else rotation
+            translation = bone_t.new_zeros(batch, 3) if translation is None else translation
+            world_r = rotation[:, None] @ bone_r
+            world_t = (bone_t @ rotation.transpose(-1, -2)) + translation[:, None]
+            forearm_points = kinematics.apply_rigid(forearm_points, rotation, translation)
+        verts = kinematics.linear_blend_skinning(rest, self.skin_weights, world_r, world_t)
         # Keypoints: a joint's own transform leaves its centre where its parent put it.
         heads = self.bone_heads[self.joint_bones]
         jb = self.joint_bones
-        joints = (bone_r[:, jb] @ heads[..., None])[..., 0] + bone_t[:, jb]
+        joints = (world_r[:, jb] @ heads[..., None])[..., 0] + world_t[:, jb]
         tips = verts[:, self.tip_vertices]
-        wrist = torch.zeros_like(joints[:, :1])
+        wrist = (
+            torch.zeros_like(joints[:, :1]) if translation is None else translation[:, None].expand_as(joints[:, :1])
+        )
         keypoints = torch.cat(
             [wrist, torch.cat([joints.reshape(batch, 5, 3, 3), tips[:, :, None]], 2).reshape(batch, 20, 3)],
             dim=1,
         )
-        if rotation is not None or translation is not None:
-            eye = torch.eye(3, dtype=verts.dtype, device=verts.device).expand(batch, 3, 3)
-            rotation = eye if rotation is None else rotation
-            translation = torch.zeros_like(verts[:, 0]) if translation is None else translation
-            verts = kinematics.apply_rigid(verts, rotation, translation)
-            keypoints = kinematics.apply_rigid(keypoints, rotation, translation)
-            forearm_points = kinematics.apply_rigid(forearm_points, rotation, translation)
         return HandOutput(verts, self.faces, keypoints, bone_r, bone_t, forearm_points)
 
     def forearm_points(
