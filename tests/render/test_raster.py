@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from handshadow.render.raster import coverage, fragments, rasterize_spans
+from handshadow.render.raster import coverage, fragments, rasterize_spans, winding_coverage
 from handshadow.render.shadow import MeshTopology, shadow_mask
 
 
@@ -36,6 +36,24 @@ def test_coverage_matches_brute_force(seed):
     assert np.array_equal(mask, brute_force(tri, h, w))
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_winding_of_triangle_boundaries_covers_their_union(seed):
+    """Triangles all run one way (negative cross product, as front faces do), their edges
+    given as directed chains: the winding coverage is their union, per batch item."""
+    rng = np.random.default_rng(seed)
+    h, w = 41, 37
+    tri = rng.uniform(-8, 48, size=(2, 25, 3, 2))
+    e1, e2 = tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :]
+    flip = (e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]) > 0
+    tri[flip] = tri[flip][:, [0, 2, 1]]
+    start = torch.as_tensor(tri.reshape(-1, 3, 2))
+    end = start[:, [1, 2, 0]]
+    batch = torch.arange(2).repeat_interleave(25 * 3)
+    got = winding_coverage(start.reshape(-1, 2), end.reshape(-1, 2), batch, 2, h, w).numpy()
+    for b in range(2):
+        assert np.array_equal(got[b], brute_force(tri[b], h, w))
+
+
 def test_fragments_list_each_covered_pixel_of_each_triangle():
     tri = torch.tensor(
         [[[[1.0, 1.0], [9.0, 2.0], [3.0, 8.0]], [[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]]]], dtype=torch.float64
@@ -55,6 +73,32 @@ def test_closed_mesh_culling_keeps_the_exact_shadow(hands64):
     culled = shadow_mask(verts, topo, 128, 128)
     everything = coverage(rasterize_spans(verts[:, hand.faces], 128, 128), 1, 128, 128)
     assert topo.closed and torch.equal(culled.bool(), everything)
+
+
+def test_posed_hands_shadow_from_their_outline_equals_every_triangle(hands64, rng):
+    """The shadow of oriented closed meshes comes from their outline edges alone
+    (raster.winding_coverage); it equals rasterising every triangle, pixel for pixel, for two
+    posed hands in a batch, partly out of the frame; a mesh with a face turned round is not
+    oriented and is rasterised triangle by triangle."""
+    from tests.conftest import random_pose, random_rotation
+
+    right, left = hands64["right"], hands64["left"]
+    rot = torch.cat([random_rotation(rng, 180.0) for _ in range(6)])
+    verts = [
+        hand(random_pose(rng, batch=6), rot, torch.as_tensor(rng.normal(0, 0.05, (6, 3)))).vertices
+        for hand in (right, left)
+    ]
+    faces = torch.cat([right.faces, left.faces + verts[0].shape[1]])
+    xy = torch.cat(verts, 1)[..., :2] * torch.as_tensor(rng.uniform(150, 400, (6, 1, 1))) + 48
+    topo = MeshTopology.from_faces(faces)
+    assert topo.oriented
+    fast = shadow_mask(xy, topo, 96, 112)
+    everything = coverage(rasterize_spans(xy[:, faces], 96, 112), 6, 96, 112)
+    assert torch.equal(fast.bool(), everything)
+    assert 0 < int(everything.sum()) < everything.numel() and not bool(everything[:, 0].all())
+    turned = faces.clone()
+    turned[0] = turned[0, [0, 2, 1]]
+    assert not MeshTopology.from_faces(turned).oriented
 
 
 def test_a_triangle_whose_normal_points_at_the_lamp_faces_the_light():

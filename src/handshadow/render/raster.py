@@ -96,6 +96,49 @@ def coverage(spans: Spans, batch: int, height: int, width: int) -> torch.Tensor:
     return counts > 0
 
 
+def winding_coverage(
+    start: torch.Tensor, end: torch.Tensor, batch_index: torch.Tensor, batch: int, height: int, width: int
+) -> torch.Tensor:
+    """(B, H, W) bool: pixel centres with a non-zero winding number about closed chains of
+    directed edges, e.g. the outline edges of a mesh's front faces (render.shadow).
+
+    The union of triangles that all run one way round is the set of points about which the
+    sum of their boundaries winds; edges two of them share in opposite directions cancel, so
+    only the outline's edges need crossing with the rows, and the cost grows with the outline,
+    not with the triangles. Each edge crosses the centre lines y = i + 0.5 in [min y, max y)
+    and adds its direction (+1 downward) at the first centre right of the crossing, and a
+    cumulative sum along the row counts. The crossings are computed as :func:`rasterize_spans`
+    computes a triangle's (from the edge's upper end, with its slope), and a crossing where the
+    count rises takes a centre on it as the triangle rasteriser does (inside), so the two agree
+    but at centres exactly on a horizontal edge or a lowest corner.
+
+    Args:
+        start, end: (M, 2) edge ends in continuous pixel coordinates (column, row), finite;
+            edges of counter-clockwise chains (negative cross product in these coordinates:
+            render.shadow.front_facing) give positive counts.
+        batch_index: (M,) long, each edge's batch item; batch, height, width: the image size.
+    """
+    device = start.device
+    down = end[:, 1] > start[:, 1]
+    top = torch.where(down[:, None], start, end)  # the upper end (smaller row)
+    bottom = torch.where(down[:, None], end, start)
+    dy = bottom[:, 1] - top[:, 1]
+    slope = (bottom[:, 0] - top[:, 0]) / torch.where(dy > 0, dy, torch.ones_like(dy))
+    row_lo = torch.ceil(top[:, 1] - 0.5).clamp_(min=0)
+    count = (torch.ceil(bottom[:, 1] - 0.5).clamp_(max=height) - row_lo).clamp_(min=0).long()
+    edge = torch.repeat_interleave(torch.arange(start.shape[0], device=device), count)
+    first = torch.cumsum(count, 0) - count
+    row = row_lo.index_select(0, edge) + (torch.arange(edge.shape[0], device=device) - first.index_select(0, edge))
+    x = top.index_select(0, edge)[:, 0] + (row + 0.5 - top.index_select(0, edge)[:, 1]) * slope.index_select(0, edge)
+    rising = down.index_select(0, edge)  # downward edges raise the count (the chains' left sides)
+    col = torch.where(rising, torch.ceil(x - 0.5), torch.floor(x - 0.5) + 1).clamp_(min=0, max=width).long()
+    base = (batch_index.index_select(0, edge) * height + row.long()) * (width + 1)
+    step = torch.where(rising, 1, -1).to(torch.int32)
+    diff = torch.zeros(batch * height * (width + 1), dtype=torch.int32, device=device)
+    diff.index_add_(0, base + col, step)
+    return torch.cumsum(diff.view(batch, height, width + 1), dim=2)[..., :width] != 0
+
+
 def fragments(spans: Spans) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Expand spans into per-pixel fragments: (batch, face, row, col), each (M,) long."""
     length = spans.col_end - spans.col_start  # empty spans expand to nothing

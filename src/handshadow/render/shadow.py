@@ -22,7 +22,7 @@ import dataclasses
 import numpy as np
 import torch
 
-from handshadow.render.raster import coverage, rasterize_spans
+from handshadow.render.raster import coverage, rasterize_spans, winding_coverage
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,13 +32,17 @@ class MeshTopology:
     faces: (F, 3) long; edge_faces: (E, 2) long, the two faces of each edge (the second is -1
     on an open boundary; a non-manifold edge keeps two); edge_corners: (E, 3) long, the edge's
     two vertices and the third corner of its first face; closed: no open boundary, so every
-    shadow point is covered by a front-facing triangle and back faces can be skipped.
+    shadow point is covered by a front-facing triangle and back faces can be skipped;
+    oriented: closed, and every edge lies between exactly two faces that run it in opposite
+    directions, so the front faces' shadow is the winding number of their outline's edges
+    (raster.winding_coverage).
     """
 
     faces: torch.Tensor
     edge_faces: torch.Tensor
     edge_corners: torch.Tensor
     closed: bool
+    oriented: bool = False
 
     @staticmethod
     def from_faces(faces: torch.Tensor) -> MeshTopology:
@@ -62,11 +66,20 @@ class MeshTopology:
             edge_faces=as_tensor(edge_faces),
             edge_corners=as_tensor(corners),
             closed=bool((edge_faces[:, 1] >= 0).all()),
+            oriented=bool(
+                (edge_faces[:, 1] >= 0).all()
+                and len(directed) == 2 * len(edges)
+                and len(np.unique(directed, axis=0)) == len(directed)
+            ),
         )
 
     def to(self, device: torch.device | str) -> MeshTopology:
         return MeshTopology(
-            self.faces.to(device), self.edge_faces.to(device), self.edge_corners.to(device), self.closed
+            self.faces.to(device),
+            self.edge_faces.to(device),
+            self.edge_corners.to(device),
+            self.closed,
+            self.oriented,
         )
 
 
@@ -91,8 +104,11 @@ class _ShadowMask(torch.autograd.Function):
         tri = _gather_triangles(points, topology.faces)  # (B, F, 3, 2)
         facing = front_facing(tri)
         # A closed surface's shadow is the union of its front-facing triangles' shadows.
-        spans = rasterize_spans(tri, height, width, keep=facing if topology.closed else None)
-        mask = coverage(spans, points.shape[0], height, width)
+        if topology.oriented:
+            mask = _front_outline_coverage(points, topology, facing, height, width)
+        else:
+            spans = rasterize_spans(tri, height, width, keep=facing if topology.closed else None)
+            mask = coverage(spans, points.shape[0], height, width)
         ctx.topology = topology
         ctx.save_for_backward(points, mask, facing)
         return mask.to(points_xy.dtype)
@@ -102,6 +118,28 @@ class _ShadowMask(torch.autograd.Function):
         points_xy, mask, facing = ctx.saved_tensors
         grad = outline_gradient(points_xy, ctx.topology, mask, grad_mask, facing)
         return grad, None, None, None
+
+
+def _front_outline_coverage(
+    points: torch.Tensor, topology: MeshTopology, facing: torch.Tensor, height: int, width: int
+) -> torch.Tensor:
+    """(B, H, W) bool: the union of the front-facing triangles of an oriented closed mesh, from
+    the edges between a front and a back face alone (raster.winding_coverage), each directed
+    as its front face runs it. points (B, V, 2); facing (B, F) bool."""
+    f0, f1 = topology.edge_faces[:, 0], topology.edge_faces[:, 1]
+    front0 = facing.index_select(1, f0)
+    b, e = torch.nonzero(front0 != facing.index_select(1, f1), as_tuple=True)
+    front = torch.where(front0[b, e], f0.index_select(0, e), f1.index_select(0, e))
+    a, c = topology.edge_corners[e, 0], topology.edge_corners[e, 1]
+    third = topology.faces.index_select(0, front).sum(1) - a - c
+    flat = points.reshape(-1, 2)
+    offset = b * points.shape[1]
+    pa, pc, po = (flat.index_select(0, offset + i) for i in (a, c, third))
+    u, w = pc - pa, po - pa
+    forward = (u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]) < 0  # a -> c as the front face runs it
+    start = torch.where(forward[:, None], pa, pc)
+    end = torch.where(forward[:, None], pc, pa)
+    return winding_coverage(start, end, b, points.shape[0], height, width)
 
 
 def _gather_triangles(points: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
