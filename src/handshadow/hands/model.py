@@ -71,6 +71,8 @@ class HandModel(torch.nn.Module):
         self.register_buffer("rest_vertices", torch.as_tensor(verts, dtype=dtype))
         self.register_buffer("faces", torch.as_tensor(faces, dtype=torch.long))
         self.register_buffer("skin_weights", torch.as_tensor(weights, dtype=dtype))
+        # The skinning's constant factor (kinematics.skinning_features), kept once.
+        self.register_buffer("skin_features", kinematics.skinning_features(self.rest_vertices, self.skin_weights))
         self.register_buffer("bone_heads", torch.as_tensor(rig.bone_heads, dtype=dtype))
         self.register_buffer("joint_axes", torch.as_tensor(rig.joint_axes, dtype=dtype))
         self.register_buffer("joint_bones", torch.as_tensor(rig.joint_bones, dtype=torch.long))
@@ -141,7 +143,8 @@ class HandModel(torch.nn.Module):
             world_r = rotation[:, None] @ bone_r
             world_t = (bone_t @ rotation.transpose(-1, -2)) + translation[:, None]
             forearm_points = kinematics.apply_rigid(forearm_points, rotation, translation)
-        verts = kinematics.linear_blend_skinning(rest, self.skin_weights, world_r, world_t)
+        features = self.skin_features if self.posedirs is None else None
+        verts = kinematics.linear_blend_skinning(rest, self.skin_weights, world_r, world_t, features)
         # Keypoints: a joint's own transform leaves its centre where its parent put it.
         heads = self.bone_heads[self.joint_bones]
         jb = self.joint_bones
