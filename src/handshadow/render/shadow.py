@@ -61,16 +61,13 @@ class MeshTopology:
         third = f[edge_faces[:, 0]].sum(1) - edges.sum(1)
         corners = np.concatenate([edges, third[:, None]], axis=1)
         as_tensor = lambda a: torch.as_tensor(a, dtype=torch.long, device=faces.device)  # noqa: E731
+        closed = bool((edge_faces[:, 1] >= 0).all())
         return MeshTopology(
             faces=as_tensor(f),
             edge_faces=as_tensor(edge_faces),
             edge_corners=as_tensor(corners),
-            closed=bool((edge_faces[:, 1] >= 0).all()),
-            oriented=bool(
-                (edge_faces[:, 1] >= 0).all()
-                and len(directed) == 2 * len(edges)
-                and len(np.unique(directed, axis=0)) == len(directed)
-            ),
+            closed=closed,
+            oriented=closed and len(directed) == 2 * len(edges) and len(np.unique(directed, axis=0)) == len(directed),
         )
 
     def to(self, device: torch.device | str) -> MeshTopology:
@@ -126,10 +123,9 @@ def _front_outline_coverage(
     """(B, H, W) bool: the union of the front-facing triangles of an oriented closed mesh, from
     the edges between a front and a back face alone (raster.winding_coverage), each directed
     as its front face runs it. points (B, V, 2); facing (B, F) bool."""
-    f0, f1 = topology.edge_faces[:, 0], topology.edge_faces[:, 1]
-    front0 = facing.index_select(1, f0)
-    b, e = torch.nonzero(front0 != facing.index_select(1, f1), as_tuple=True)
-    front = torch.where(front0[b, e], f0.index_select(0, e), f1.index_select(0, e))
+    b, e = contour_edges(facing, topology)  # one face front, the other back (no open edges)
+    f0, f1 = topology.edge_faces[e, 0], topology.edge_faces[e, 1]
+    front = torch.where(facing[b, f0], f0, f1)
     a, c = topology.edge_corners[e, 0], topology.edge_corners[e, 1]
     third = topology.faces.index_select(0, front).sum(1) - a - c
     flat = points.reshape(-1, 2)
