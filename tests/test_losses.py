@@ -122,3 +122,11 @@ def test_square_closing_equals_the_max_pool_closing_to_the_bit():
         for masks in (noise, shapes):
             expected = -pool(-pool(masks[:, None], k, 1, radius), k, 1, radius)[:, 0]
             assert torch.equal(losses.square_closing(masks, radius), expected)
+    # A frame large enough for the blockwise products (render.banded), not a multiple of a block.
+    masks = (torch.rand(2, 264, 300, generator=gen) > 0.6).float()
+    masks[0, 100:180, 0:120] = 1
+    masks[0, 140:142, 4:110] = 0
+    for radius in (1, 2, 5):
+        k = 2 * radius + 1
+        expected = -pool(-pool(masks[:, None], k, 1, radius), k, 1, radius)[:, 0]
+        assert torch.equal(losses.square_closing(masks, radius), expected)

@@ -16,6 +16,7 @@ from scipy import ndimage
 from skimage.morphology import disk
 
 from handshadow.metrics import thin_parts
+from handshadow.render.banded import BandedMatrix
 from handshadow.render.soft import gaussian_blur
 
 
@@ -129,21 +130,21 @@ def square_closing(masks: torch.Tensor, radius_px: int) -> torch.Tensor:
     """Morphological closing of binary masks (B, H, W) (0 or 1) with a square of side
     2 radius_px + 1, windows cut at the frame's border (a max pool padded with -inf, then a
     min pool likewise). Each pass counts the ones in every window with two products of banded
-    0/1 matrices: exact (small integers), and on a CPU a fraction of a stride-1 max pool's
-    cost. -> (B, H, W) 0 or 1."""
+    0/1 matrices (blockwise on large frames, render.banded): exact (small integers), and on a
+    CPU a fraction of a stride-1 max pool's cost. -> (B, H, W) 0 or 1."""
     _, height, width = masks.shape
     rows = _band(height, radius_px, masks.dtype, str(masks.device))
     cols = _band(width, radius_px, masks.dtype, str(masks.device))
-    dilated = ((rows @ masks @ cols) > 0).to(masks.dtype)
-    window = rows.sum(1)[:, None] * cols.sum(0)[None]  # pixels each window holds inside the frame
-    return ((rows @ dilated @ cols) == window).to(masks.dtype)
+    dilated = (cols.cols(rows.rows(masks)) > 0).to(masks.dtype)
+    window = rows.dense.sum(1)[:, None] * cols.dense.sum(0)[None]  # pixels each window holds inside the frame
+    return (cols.cols(rows.rows(dilated)) == window).to(masks.dtype)
 
 
 @functools.lru_cache(maxsize=16)
-def _band(n: int, radius: int, dtype, device: str) -> torch.Tensor:
-    """(n, n) 0/1 matrix, 1 where |i - j| <= radius (symmetric)."""
+def _band(n: int, radius: int, dtype, device: str) -> BandedMatrix:
+    """(n, n) 0/1 matrix, 1 where |i - j| <= radius (symmetric), in banded form."""
     i = torch.arange(n)
-    return ((i[:, None] - i[None]).abs() <= radius).to(dtype=dtype, device=device)
+    return BandedMatrix.of(((i[:, None] - i[None]).abs() <= radius).to(dtype=dtype, device=device), radius)
 
 
 def penetration(depths_m: torch.Tensor, scale_m: float = 0.01) -> torch.Tensor:

@@ -12,6 +12,8 @@ import math
 
 import torch
 
+from handshadow.render.banded import BandedMatrix
+
 
 def gaussian_blur(images: torch.Tensor, sigma_px: float) -> torch.Tensor:
     """Separable Gaussian blur.
@@ -22,15 +24,26 @@ def gaussian_blur(images: torch.Tensor, sigma_px: float) -> torch.Tensor:
     Returns:
         (B, H, W), borders extended by replication (a forearm that leaves the frame stays dark).
 
-    Each pass is a product with a banded (N, N) blur matrix (blur_matrix): on a CPU a matrix
-    product and its gradient cost a fraction of a one-channel convolution's.
+    Each pass is a product with a banded (N, N) blur matrix (blur_matrix), blockwise on large
+    frames (render.banded): on a CPU a matrix product and its gradient cost a fraction of a
+    one-channel convolution's.
     """
     if sigma_px <= 0:
         return images
     _, height, width = images.shape
-    rows = blur_matrix(height, sigma_px, images.dtype, images.device)
-    cols = blur_matrix(width, sigma_px, images.dtype, images.device)
-    return rows @ images @ cols.T
+    rows = _banded_blur(height, float(sigma_px), images.dtype, str(images.device))
+    cols = _banded_blur(width, float(sigma_px), images.dtype, str(images.device))
+    return cols.cols(rows.rows(images))
+
+
+def blur_radius(sigma_px: float) -> int:
+    """Taps of a blur on each side of its centre: within 3 sigma, at least one."""
+    return max(1, int(math.ceil(3 * sigma_px)))
+
+
+@functools.lru_cache(maxsize=64)
+def _banded_blur(n: int, sigma_px: float, dtype, device: str) -> BandedMatrix:
+    return BandedMatrix.of(blur_matrix(n, sigma_px, dtype, device), blur_radius(sigma_px))
 
 
 def blur_matrix(n: int, sigma_px: float, dtype=torch.float32, device="cpu") -> torch.Tensor:
@@ -41,7 +54,7 @@ def blur_matrix(n: int, sigma_px: float, dtype=torch.float32, device="cpu") -> t
 
 @functools.lru_cache(maxsize=64)
 def _blur_matrix(n: int, sigma_px: float, dtype, device: str) -> torch.Tensor:
-    radius = max(1, int(math.ceil(3 * sigma_px)))
+    radius = blur_radius(sigma_px)
     taps = torch.arange(-radius, radius + 1, dtype=torch.float64)
     kernel = torch.exp(-0.5 * (taps / sigma_px) ** 2)
     kernel = kernel / kernel.sum()
