@@ -128,7 +128,21 @@ def test_a_tight_fist_passes_into_its_palm_and_an_open_one_does_not(right_and_le
             pose[0, 3 * f : 3 * f + 3, 2] = torch.tensor(np.radians([80.0, 95.0, 60.0])) * scale
         return right(pose).vertices[0].numpy()
 
-    assert penetration([fist(1.0)], [right.faces.numpy()], [parts]).within_mm[0] > 10
+    tight = fist(1.0)
+    found = penetration([tight], [right.faces.numpy()], [parts])
+    assert found.within_mm[0] > 10
+    # Each contact names, in the hand's own vertex indices, a triangle of another part's skin
+    # whose nearest point lies at the contact's depth from the vertex.
+    c = found.contacts
+    nearest = (c.bary[:, :, None] * tight[c.corners]).sum(1)
+    assert np.allclose(np.linalg.norm(nearest - tight[c.vertex], axis=1), c.depth_m, atol=1e-9)
+    owner = np.full(len(tight), -1)
+    for k, part in enumerate((*parts.fingers, parts.palm)):
+        owner[part.vertices] = k
+    skins = [set(map(tuple, np.sort(p.faces, 1))) for p in (*parts.fingers, parts.palm)]
+    for vertex, corners in zip(c.vertex, np.sort(c.corners, 1)):
+        holder = [k for k, skin in enumerate(skins) if tuple(corners) in skin]
+        assert holder and owner[vertex] not in holder
     assert penetration([fist(0.0)], [right.faces.numpy()], [parts]).within_mm[0] == 0.0
     assert penetration([fist(0.6)], [right.faces.numpy()], [parts]).within_mm[0] <= TOLERANCE_MM
 

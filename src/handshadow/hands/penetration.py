@@ -24,6 +24,7 @@ along the other surface's normal.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import igl
 import numpy as np
@@ -43,7 +44,7 @@ FINGER_BASE = 0  # segment index of a finger's base (MCP; the thumb's CMC)
 class Part:
     """A closed piece of one hand's mesh: faces (F, 3) into the hand's vertices, and the
     boundary loops (each an (L,) vertex index array, in order) that a fan from the loop's
-    centre closes; vertices (N,) it owns."""
+    centre closes; vertices (N,) it owns, ascending (those its faces use)."""
 
     name: str
     faces: np.ndarray
@@ -51,12 +52,22 @@ class Part:
     vertices: np.ndarray
 
     def closed(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(vertices, faces) of the part closed by its caps, given the hand's posed vertices
-        (V, 3); the caps' centres are appended after the hand's vertices."""
-        centres = [positions[loop].mean(0) for loop in self.loops]
-        n = len(positions)
-        caps = [np.stack([loop, np.roll(loop, -1), np.full(len(loop), n + k)], 1) for k, loop in enumerate(self.loops)]
-        return np.concatenate([positions, np.asarray(centres).reshape(-1, 3)]), np.concatenate([self.faces, *caps])
+        """(vertices (N + C, 3), faces) of the part closed by its C caps, given the hand's
+        posed vertices (V, 3): the part's own vertices in the order of ``vertices``, then the
+        caps' centres; the faces (its own first, then the caps') index into them."""
+        own = positions[self.vertices]
+        local_loops, closed_faces = self._local
+        centres = [own[loop].mean(0) for loop in local_loops]
+        return np.concatenate([own, np.asarray(centres).reshape(-1, 3)]), closed_faces
+
+    @functools.cached_property
+    def _local(self) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+        """The loops and the closed faces in the part's own vertex order (closed())."""
+        local = lambda idx: np.searchsorted(self.vertices, idx)  # noqa: E731
+        loops = tuple(local(loop) for loop in self.loops)
+        n = len(self.vertices)
+        caps = [np.stack([loop, np.roll(loop, -1), np.full(len(loop), n + k)], 1) for k, loop in enumerate(loops)]
+        return loops, np.concatenate([local(self.faces), *caps])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -158,23 +169,25 @@ def penetration(
     found, between = [], 0.0
     if len(positions) == 2:
         for a, b in ((0, 1), (1, 0)):
-            hull = Hull.of(positions[b][faces[b].ravel()])
-            c = _inside(positions[a], np.arange(len(positions[a])), positions[b], faces[b], a, b, report_mm, hull)
+            hull = Hull.of(positions[b])
+            (c,) = _inside(positions[a], [np.arange(len(positions[a]))], positions[b], faces[b], a, b, report_mm, hull)
             between = max(between, float(c.depth_m.max(initial=0.0)) * 1000)
             found.append(c)
     within = []
     for h, split in enumerate(parts or []):
         closed = {part.name: part.closed(positions[h]) for part in (*split.fingers, split.palm)}
-        hulls = {name: Hull.of(verts[tri.ravel()]) for name, (verts, tri) in closed.items()}
-        deepest = 0.0
-        for target, queries in _part_pairs(split):
+        pairs = list(_part_pairs(split))
+        results: list[Contacts] = [Contacts.empty()] * len(pairs)
+        # One pass per part over every query of it (one tree per part), kept in the pairs' order.
+        for target in (*split.fingers, split.palm):
+            which = [i for i, (t, _) in enumerate(pairs) if t is target]
             verts, tri = closed[target.name]
-            c = _inside(
-                positions[h], queries, verts, tri, h, h, report_mm, hulls[target.name], n_surface=len(target.faces)
-            )
-            deepest = max(deepest, float(c.depth_m.max(initial=0.0)) * 1000)
-            found.append(c)
-        within.append(deepest)
+            groups = [pairs[i][1] for i in which]
+            hull = Hull.of(verts)
+            for i, c in zip(which, _inside(positions[h], groups, verts, tri, h, h, report_mm, hull, target)):
+                results[i] = c
+        within.append(max(float(c.depth_m.max(initial=0.0)) for c in results) * 1000)
+        found.extend(results)
     return Penetration(between, tuple(within), Contacts.cat(found))
 
 
@@ -215,31 +228,52 @@ def _part_pairs(split: HandParts):
         yield split.palm, beyond_base
 
 
-def _inside(query_pos, query_idx, verts, tri, mesh, other, report_mm, hull: Hull, n_surface=None) -> Contacts:
-    """Contacts of the query vertices (indices into query_pos) inside the closed (verts, tri),
-    whose points the hull holds; the nearest point is sought on its first n_surface triangles
-    (the skin, not a part's caps)."""
+def _inside(query_pos, groups, verts, tri, mesh, other, report_mm, hull: Hull, part: Part | None = None) -> list:
+    """Per group of query vertices (each an index array into query_pos), its Contacts inside
+    the closed (verts, tri), whose points the hull holds; the groups are tested together, each
+    point on its own. With ``part`` (verts, tri are its closed(): its own vertices, then its
+    caps' centres) the nearest point is sought on its skin, not its caps, and the corners are
+    given as the hand's vertex indices."""
+    query_idx = np.concatenate(groups)
+    group = np.repeat(np.arange(len(groups)), [len(g) for g in groups])
     pts = query_pos[query_idx]
     near = hull.holds(pts)  # only points in the surface's box can be inside
     if not near.any():
-        return Contacts.empty()
-    idx, pts = query_idx[near], pts[near]
+        return [Contacts.empty()] * len(groups)
+    idx, group, pts = query_idx[near], group[near], pts[near]
     inside = winding_inside(verts, tri, pts)
     if not inside.any():
-        return Contacts.empty()
-    idx, pts = idx[inside], pts[inside]
-    skin = tri if n_surface is None else tri[:n_surface]
+        return [Contacts.empty()] * len(groups)
+    idx, group, pts = idx[inside], group[inside], pts[inside]
+    skin = tri if part is None else tri[: len(part.faces)]
     sq, tid, closest = igl.point_mesh_squared_distance(pts, verts, skin)
     depth = np.sqrt(sq)
     keep = depth * 1000 >= report_mm
-    idx, tid, closest, depth = idx[keep], tid[keep], closest[keep], depth[keep]
+    idx, group, tid, closest, depth = idx[keep], group[keep], tid[keep], closest[keep], depth[keep]
     corners = skin[tid]
     a, b, c = verts[corners[:, 0]], verts[corners[:, 1]], verts[corners[:, 2]]
     bary = _barycentric(closest, a, b, c)
     normal = np.cross(b - a, c - a)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-30)
-    n = len(idx)
-    return Contacts(np.zeros(n, np.int64), np.full(n, mesh), idx, np.full(n, other), corners, bary, normal, depth)
+    if part is not None:
+        corners = part.vertices[corners]
+    out = []
+    for g in range(len(groups)):
+        sel = group == g
+        n = int(sel.sum())
+        out.append(
+            Contacts(
+                np.zeros(n, np.int64),
+                np.full(n, mesh),
+                idx[sel],
+                np.full(n, other),
+                corners[sel],
+                bary[sel],
+                normal[sel],
+                depth[sel],
+            )
+        )
+    return out
 
 
 def winding_inside(verts: np.ndarray, tri: np.ndarray, points: np.ndarray) -> np.ndarray:
