@@ -52,13 +52,13 @@ class BandedMatrix:
         """matrix @ x for x (B, n, m) -> (B, n, m)."""
         if self.blocks is None:
             return self.dense @ x
-        return _BandedRows.apply(x, self.blocks, self.blocks_t, self.radius)
+        return _Banded.apply(x, self.blocks, self.blocks_t, self.radius, rows_product)
 
     def cols(self, x: torch.Tensor) -> torch.Tensor:
         """x @ matrix.T for x (B, m, n) -> (B, m, n)."""
         if self.blocks is None:
             return x @ self.dense.T
-        return _BandedCols.apply(x, self.blocks, self.blocks_t, self.radius)
+        return _Banded.apply(x, self.blocks, self.blocks_t, self.radius, cols_product)
 
 
 def _blocks(dense: torch.Tensor, radius: int) -> torch.Tensor:
@@ -88,29 +88,16 @@ def cols_product(blocks: torch.Tensor, radius: int, x: torch.Tensor) -> torch.Te
     return out.transpose(1, 2).reshape(batch, m, count * b)[:, :, :n]
 
 
-class _BandedRows(torch.autograd.Function):
-    # y = M x, so dL/dx = M^T dL/dy: the transpose's blocks, the same way round.
+class _Banded(torch.autograd.Function):
+    # y = M x (rows) or x M^T (cols), so dL/dx is the same product with M^T: the transpose's
+    # blocks, the same way round.
     @staticmethod
-    def forward(ctx, x, blocks, blocks_t, radius):
+    def forward(ctx, x, blocks, blocks_t, radius, product):
         ctx.save_for_backward(blocks_t)
-        ctx.radius = radius
-        return rows_product(blocks, radius, x)
+        ctx.radius, ctx.product = radius, product
+        return product(blocks, radius, x)
 
     @staticmethod
     def backward(ctx, grad):
         (blocks_t,) = ctx.saved_tensors
-        return rows_product(blocks_t, ctx.radius, grad.contiguous()), None, None, None
-
-
-class _BandedCols(torch.autograd.Function):
-    # y = x M^T, so dL/dx = dL/dy M = dL/dy (M^T)^T.
-    @staticmethod
-    def forward(ctx, x, blocks, blocks_t, radius):
-        ctx.save_for_backward(blocks_t)
-        ctx.radius = radius
-        return cols_product(blocks, radius, x)
-
-    @staticmethod
-    def backward(ctx, grad):
-        (blocks_t,) = ctx.saved_tensors
-        return cols_product(blocks_t, ctx.radius, grad.contiguous()), None, None, None
+        return ctx.product(blocks_t, ctx.radius, grad.contiguous()), None, None, None, None
