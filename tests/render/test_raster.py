@@ -112,3 +112,23 @@ def test_a_triangle_whose_normal_points_at_the_lamp_faces_the_light():
     xy, _ = scene.project(tri)
     assert bool(front_facing(xy[:, None])[0, 0])
     assert not bool(front_facing(xy[:, None, [0, 2, 1]])[0, 0])  # the same triangle turned away
+
+
+def test_facing_gathered_by_vertex_is_front_facing_to_the_bit():
+    """shadow.facing_of (corners picked vertex-major, the renderer's fast path) gives exactly
+    front_facing of the gathered triangles, and contour_edges the pairs a direct test lists."""
+    from handshadow.render.shadow import contour_edges, facing_of, front_facing
+
+    rng = np.random.default_rng(3)
+    points = torch.as_tensor(rng.uniform(0, 64, (5, 40, 2)))
+    faces = torch.as_tensor(rng.integers(0, 40, (90, 3)))
+    faces[:4] = torch.tensor([[0, 1, 1], [2, 2, 2], [3, 4, 5], [5, 4, 3]])  # degenerate, reversed
+    facing = facing_of(points, faces)
+    assert torch.equal(facing, front_facing(points[:, faces]))
+    assert 0 < int(facing.sum()) < facing.numel()
+    topology = MeshTopology.from_faces(faces)
+    b, e = contour_edges(facing, topology)
+    f0, f1 = topology.edge_faces[:, 0], topology.edge_faces[:, 1]
+    direct = (facing[:, f0] != facing[:, f1.clamp(min=0)]) | (f1 < 0)
+    assert torch.equal(torch.stack([b, e]), torch.stack(torch.nonzero(direct, as_tuple=True)))
+    assert 0 < b.numel() < direct.numel()

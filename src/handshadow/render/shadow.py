@@ -98,12 +98,13 @@ class _ShadowMask(torch.autograd.Function):
     @staticmethod
     def forward(ctx, points_xy, topology, height, width):
         points = points_xy.detach()
-        tri = _gather_triangles(points, topology.faces)  # (B, F, 3, 2)
-        facing = front_facing(tri)
         # A closed surface's shadow is the union of its front-facing triangles' shadows.
         if topology.oriented:
+            facing = facing_of(points, topology.faces)
             mask = _front_outline_coverage(points, topology, facing, height, width)
         else:
+            tri = _gather_triangles(points, topology.faces)  # (B, F, 3, 2)
+            facing = front_facing(tri)
             spans = rasterize_spans(tri, height, width, keep=facing if topology.closed else None)
             mask = coverage(spans, points.shape[0], height, width)
         ctx.topology = topology
@@ -157,6 +158,16 @@ def front_facing(tri_xy: torch.Tensor) -> torch.Tensor:
     return (e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]) < 0
 
 
+def facing_of(points_xy: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """(B, F) bool: :func:`front_facing` of the triangles ``faces`` (F, 3) of points (B, V, 2),
+    with the same arithmetic (so the same bits). The corners are gathered vertex-major, (V, B, 2)
+    rows picked whole: on a CPU that is several times faster than picking along dim 1."""
+    by_vertex = points_xy.transpose(0, 1).contiguous()  # (V, B, 2)
+    p0, p1, p2 = (by_vertex.index_select(0, faces[:, k]) for k in range(3))  # (F, B, 2) each
+    e1, e2 = p1 - p0, p2 - p0
+    return ((e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]) < 0).t()
+
+
 def contour_edges(facing: torch.Tensor, topology: MeshTopology) -> tuple[torch.Tensor, torch.Tensor]:
     """The edges that can lie on the outline, per batch item.
 
@@ -165,8 +176,9 @@ def contour_edges(facing: torch.Tensor, topology: MeshTopology) -> tuple[torch.T
     always can. Args: facing (B, F) bool. Returns (batch, edge) index pairs, each (M,) long.
     """
     f0, f1 = topology.edge_faces[:, 0], topology.edge_faces[:, 1]
-    candidate = (facing.index_select(1, f0) != facing.index_select(1, f1.clamp(min=0))) | (f1 < 0)
-    return torch.nonzero(candidate, as_tuple=True)
+    by_face = facing.t().contiguous()  # (F, B): whole rows picked, much faster than along dim 1
+    candidate = (by_face.index_select(0, f0) != by_face.index_select(0, f1.clamp(min=0))) | (f1 < 0)[:, None]
+    return torch.nonzero(candidate.t().contiguous(), as_tuple=True)
 
 
 def outline_gradient(
