@@ -15,14 +15,17 @@ def _box(n: int, radius: int) -> torch.Tensor:
 def test_blockwise_products_equal_the_dense_ones_and_their_gradients():
     gen = torch.Generator().manual_seed(5)
     # Sizes a multiple of the block and not; a replicated-border blur (not symmetric at the
-    # ends) and a box count; radii from 1 to 12 pixels.
+    # ends) and a box count; radii from 1 to 12 pixels, and one wider than a block (the rows'
+    # blocks then as wide as the band).
     for n, matrix, radius in (
         (256, blur_matrix(256, 1.0, torch.float64), blur_radius(1.0)),
         (300, blur_matrix(300, 4.0, torch.float64), blur_radius(4.0)),
         (257, _box(257, 2), 2),
+        (410, _box(410, 21), 21),
     ):
         band = BandedMatrix.of(matrix, radius)
         assert band.blocks is not None and band.blocks.shape[1] == BLOCK
+        assert band.tridiagonal.shape[2] == max(BLOCK, radius)
         x = torch.rand(3, n, 70, dtype=torch.float64, generator=gen, requires_grad=True)
         g = torch.rand(3, n, 70, dtype=torch.float64, generator=gen)
         for product, dense in (
