@@ -153,9 +153,7 @@ def front_facing(tri_xy: torch.Tensor) -> torch.Tensor:
     triangle's projected corners run counter-clockwise on screen: a negative cross product in
     (column, row) coordinates. In a mirrored frame it picks the back faces instead, which cast
     the same shadow on a closed mesh."""
-    e1 = tri_xy[:, :, 1] - tri_xy[:, :, 0]
-    e2 = tri_xy[:, :, 2] - tri_xy[:, :, 0]
-    return (e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]) < 0
+    return _turn_counter_clockwise(tri_xy[:, :, 0], tri_xy[:, :, 1], tri_xy[:, :, 2])
 
 
 def facing_of(points_xy: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
@@ -164,8 +162,14 @@ def facing_of(points_xy: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
     rows picked whole: on a CPU that is several times faster than picking along dim 1."""
     by_vertex = points_xy.transpose(0, 1).contiguous()  # (V, B, 2)
     p0, p1, p2 = (by_vertex.index_select(0, faces[:, k]) for k in range(3))  # (F, B, 2) each
+    return _turn_counter_clockwise(p0, p1, p2).t()
+
+
+def _turn_counter_clockwise(p0: torch.Tensor, p1: torch.Tensor, p2: torch.Tensor) -> torch.Tensor:
+    """(...) bool: corners (..., 2) each, in (column, row) coordinates, that run counter-clockwise
+    on screen (a negative cross product): the front-face rule of :func:`front_facing`."""
     e1, e2 = p1 - p0, p2 - p0
-    return ((e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]) < 0).t()
+    return (e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]) < 0
 
 
 def contour_edges(facing: torch.Tensor, topology: MeshTopology) -> tuple[torch.Tensor, torch.Tensor]:
