@@ -151,7 +151,7 @@ def _refine(problem, path, level, targets, steps, weights, contacts: Contacts | 
         outs = problem.pose(hands)
         shadow = level.renderer.render([o.vertices for o in outs])
         sil = ((gaussian_blur(shadow.mask, blur) - gaussian_blur(targets, blur)) ** 2).mean((1, 2))
-        pen = losses.penetration(problem.proxy_depths(hands, outs))
+        pen = problem.proxy_penetration(hands, outs)
         place = losses.placement(shadow.heights, *problem.placement_range)
         smooth, accel, hinge = path_smoothness(hands)
         per_frame = weights.penetration * pen + weights.placement * place + weights.morph * sil

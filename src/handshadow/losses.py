@@ -147,9 +147,15 @@ def _band(n: int, radius: int, dtype, device: str) -> BandedMatrix:
     return BandedMatrix.of(((i[:, None] - i[None]).abs() <= radius).to(dtype=dtype, device=device), radius)
 
 
-def penetration(depths_m: torch.Tensor, scale_m: float = 0.01) -> torch.Tensor:
-    """Sum of squared penetration depths in units of scale_m. depths (B, P) metres -> (B,)."""
-    return ((depths_m / scale_m) ** 2).sum(1)
+def penetration(
+    depths_m: torch.Tensor, scale_m: float = 0.01, item: torch.Tensor | None = None, batch: int = 0
+) -> torch.Tensor:
+    """Sum of squared penetration depths in units of scale_m per hypothesis. depths (B, P)
+    metres -> (B,); or, given ``item``, the depths (K,) of K pairs and the hypothesis each
+    belongs to (K,), of a batch of ``batch`` -> (batch,) (the pairs left out count 0)."""
+    if item is None:
+        return ((depths_m / scale_m) ** 2).sum(1)
+    return depths_m.new_zeros(batch).index_add(0, item, (depths_m / scale_m) ** 2)
 
 
 def placement(heights_m: torch.Tensor, lo_m: float, hi_m: float, scale_m: float = 0.01) -> torch.Tensor:
@@ -200,9 +206,11 @@ def thin_coverage(segments_xy: torch.Tensor, maps: TargetMaps) -> torch.Tensor:
     pts = maps.thin_points
     if pts.shape[0] == 0:
         return segments_xy.new_zeros(segments_xy.shape[0])
-    a, b = segments_xy[:, None, :, 0], segments_xy[:, None, :, 1]  # (B, 1, S, 2)
-    p = pts[None, :, None, :]  # (1, N, 1, 2)
-    ab = b - a
-    t = (((p - a) * ab).sum(-1) / (ab * ab).sum(-1).clamp(min=1e-9)).clamp(0, 1)
-    d = (p - (a + t[..., None] * ab)).norm(dim=-1).amin(2)  # (B, N)
-    return ((d / maps.target.shape[0]) ** 2).mean(1)
+    # x and y apart, and squared distances throughout: no (B, N, S, 2) tensors, no root.
+    ax, ay = segments_xy[:, None, :, 0, 0], segments_xy[:, None, :, 0, 1]  # (B, 1, S)
+    abx, aby = segments_xy[:, None, :, 1, 0] - ax, segments_xy[:, None, :, 1, 1] - ay
+    px, py = pts[None, :, 0, None] - ax, pts[None, :, 1, None] - ay  # (B, N, S): from a
+    t = ((px * abx + py * aby) / (abx * abx + aby * aby).clamp(min=1e-9)).clamp(0, 1)
+    dx, dy = px - t * abx, py - t * aby
+    nearest = (dx * dx + dy * dy).amin(2)  # (B, N) squared pixels
+    return (nearest / maps.target.shape[0] ** 2).mean(1)

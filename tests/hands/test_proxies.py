@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import torch
 
+from handshadow import losses
 from handshadow.hands import load_hand
 from handshadow.hands.proxies import PenetrationModel, hand_spheres
 
@@ -90,9 +91,9 @@ def _dense_depths(model, centres, light):
     return torch.relu(model.reach - d).flatten(1)
 
 
-def test_the_broad_phase_gives_every_pairs_depth_and_gradient(pair):
+def _six_hypotheses(pair, gen):
+    """Proxy centres (6, S, 3) of two hands, from far apart to through each other."""
     hands, model = pair
-    gen = torch.Generator().manual_seed(0)
     curled = pose(**{f: [(0, 0, 60), (0, 0, 70), (0, 0, 40)] for f in ("index", "middle", "ring", "little")})
     rest = pose()
     outs, globals_ = [], []
@@ -105,7 +106,13 @@ def test_the_broad_phase_gives_every_pairs_depth_and_gradient(pair):
         p = (curled if k else rest).expand(6, 15, 3)
         outs.append(hand(p, rot, trans))
         globals_.append((rot, trans))
-    centres = model.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_).detach()
+    return model.centres([(o.bone_rotations, o.bone_translations) for o in outs], globals_).detach()
+
+
+def test_the_broad_phase_gives_every_pairs_depth_and_gradient(pair):
+    _, model = pair
+    gen = torch.Generator().manual_seed(0)
+    centres = _six_hypotheses(pair, gen)
     light = torch.tensor([0.0, 0.0, 2.0], dtype=torch.float64)
     a = centres.clone().requires_grad_(True)
     b = centres.clone().requires_grad_(True)
@@ -116,3 +123,28 @@ def test_the_broad_phase_gives_every_pairs_depth_and_gradient(pair):
     (fast * weights).sum().backward()
     (dense * weights).sum().backward()
     assert torch.allclose(a.grad, b.grad, atol=1e-12)
+
+
+def test_the_touching_pairs_give_the_dense_penetration_term(pair):
+    """The objective's penetration term summed over the touching pairs alone (with and without
+    the light's split) equals the term of every pair's depth worked out densely, and so does
+    its gradient; a hypothesis with its hands apart costs exactly 0."""
+    _, model = pair
+    centres = _six_hypotheses(pair, torch.Generator().manual_seed(1))
+    light = torch.tensor([0.0, 0.0, 2.0], dtype=torch.float64)
+    for lamp in (light, None):
+        a = centres.clone().requires_grad_(True)
+        b = centres.clone().requires_grad_(True)
+        item, _, _, depth = model.touching(a, lamp)
+        sparse = losses.penetration(depth, item=item, batch=6)
+        if lamp is None:
+            dense = torch.relu(model.reach - (b[:, :, None] - b[:, None]).pow(2).sum(-1).clamp(min=1e-18).sqrt())
+            dense = losses.penetration(dense.flatten(1))
+        else:
+            dense = losses.penetration(_dense_depths(model, b, lamp))
+        assert float(sparse[0]) == 0.0 and float(sparse[-1]) > 1.0
+        assert torch.allclose(sparse, dense, rtol=1e-12, atol=0)
+        weights = torch.linspace(0.5, 1.5, 6, dtype=torch.float64)
+        (sparse * weights).sum().backward()
+        (dense * weights).sum().backward()
+        assert torch.allclose(a.grad, b.grad, atol=1e-12)

@@ -175,23 +175,34 @@ class PenetrationModel(torch.nn.Module):
         if light is None or not bool(self.across.any()):
             d = torch.cdist(centres, centres)
             return torch.relu(self.reach - d).flatten(1)
-        # Broad phase: only the pairs that touch in some hypothesis are worked out with their
-        # gradient (a few hundred of B x S x S); the rest are exactly 0 with no gradient.
+        b, i, j, depth = self.touching(centres, light)
+        n = centres.shape[1]
+        out = centres.new_zeros(centres.shape[0], n * n)
+        return out.index_put((b, i * n + j), depth)
+
+    def touching(
+        self, centres: torch.Tensor, light: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The tested pairs that touch in some hypothesis, or nearly (the broad phase):
+        (hypothesis, sphere, sphere) indices (K,) each and their penetration depths (K,),
+        metres, with the gradient (the pairs left out are exactly 0, with none). ``light``:
+        as in :meth:`depths`. centres (B, S, 3)."""
+        # Only the pairs that touch in some hypothesis are worked out with their gradient (a
+        # few hundred of B x S x S).
         b, i, j = self._touching(centres)
         ci, cj = centres[b, i], centres[b, j]  # (K, 3)
         diff = ci - cj
-        with torch.no_grad():
-            ray = 0.5 * (ci + cj) - light
-            ray = ray / ray.norm(dim=-1, keepdim=True).clamp(min=1e-9)
-        along = (diff * ray).sum(-1, keepdim=True) * ray
-        side = diff - along
-        across_only = torch.where(
-            self.across[i, j][:, None], along + SIDEWAYS * side + (1 - SIDEWAYS) * side.detach(), diff
-        )
-        d = (across_only * across_only).sum(-1).clamp(min=1e-18).sqrt()
-        n = centres.shape[1]
-        out = centres.new_zeros(centres.shape[0], n * n)
-        return out.index_put((b, i * n + j), torch.relu(self.reach[i, j] - d))
+        if light is not None and bool(self.across.any()):
+            with torch.no_grad():
+                ray = 0.5 * (ci + cj) - light
+                ray = ray / ray.norm(dim=-1, keepdim=True).clamp(min=1e-9)
+            along = (diff * ray).sum(-1, keepdim=True) * ray
+            side = diff - along
+            diff = torch.where(
+                self.across[i, j][:, None], along + SIDEWAYS * side + (1 - SIDEWAYS) * side.detach(), diff
+            )
+        d = (diff * diff).sum(-1).clamp(min=1e-18).sqrt()
+        return b, i, j, torch.relu(self.reach[i, j] - d)
 
     @torch.no_grad()
     def _touching(self, centres: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

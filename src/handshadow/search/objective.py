@@ -131,7 +131,7 @@ def view_objective(
     )
     for (terms, shadow), level in zip(views, levels):
         terms["excess"] = w.excess * losses.excess(shadow.mask, level.maps.outside_dist)
-    penetration = w.penetration * losses.penetration(problem.proxy_depths(hands, outs))
+    penetration = w.penetration * problem.proxy_penetration(hands, outs)
     found = contacts(outs) if contacts is not None and w.contacts else None
     contact = zero
     if found is not None and len(found.item):

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 from skimage.transform import resize
 
+from handshadow import losses
 from handshadow.hands.arms import ArmCheck, check_arms
 from handshadow.hands.limits import JointLimits
 from handshadow.hands.model import HandModel, HandOutput
@@ -204,10 +205,19 @@ class Problem:
 
     def proxy_depths(self, hands: list[HandPoseBatch], outs: list[HandOutput], light: bool = True) -> torch.Tensor:
         """(B, P) penetration depths of the collision proxies, metres (see PenetrationModel)."""
-        centres = self.penetration.centres(
+        return self.penetration.depths(self._proxy_centres(hands, outs), self.light_position if light else None)
+
+    def proxy_penetration(self, hands: list[HandPoseBatch], outs: list[HandOutput]) -> torch.Tensor:
+        """(B,) the penetration term (losses.penetration) of the collision proxies, pushed apart
+        along the light's rays: the same as from :meth:`proxy_depths`, summed over the pairs that
+        touch only (a few hundred of the B x S x S the dense depths hold)."""
+        b, _, _, depth = self.penetration.touching(self._proxy_centres(hands, outs), self.light_position)
+        return losses.penetration(depth, item=b, batch=hands[0].batch)
+
+    def _proxy_centres(self, hands: list[HandPoseBatch], outs: list[HandOutput]) -> torch.Tensor:
+        return self.penetration.centres(
             [(o.bone_rotations, o.bone_translations) for o in outs], [(h.rotation, h.translation) for h in hands]
         )
-        return self.penetration.depths(centres, self.light_position if light else None)
 
     @torch.no_grad()
     def mesh_penetration(self, poses: PoseBatch, within: bool = True) -> list[Penetration]:
