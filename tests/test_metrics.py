@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from handshadow.metrics import FitScore, far_outline, hd95, iou, score, thin_recall
+from handshadow.metrics import FitScore, far_outline, far_regions, hd95, iou, score, thin_recall
 
 
 def head_with_ears(size: int = 200, ears: bool = True) -> np.ndarray:
@@ -169,3 +169,25 @@ def test_far_outline_marks_where_the_outline_fails_the_hd95_bar():
     far = far_outline(bumped, target)
     assert far[89, 45:55].all() and far[83:89, 45].all() and far[79, 48:52].all()
     assert far.sum() == 10 + 2 * 6 + 4 and not far[80:83].any()
+
+
+def test_far_regions_are_the_wrong_regions_that_fail_the_hd95_bar():
+    # The bar is 0.03 of the frame height: 3 px here.
+    target = np.zeros((100, 100), bool)
+    target[20:80, 20:80] = True
+    target[20:50, 45:51] = False  # a notch 6 px wide, 30 px deep, from the top edge
+    target[5:20, 30:34] = True  # an ear 4 px wide, 15 px long
+    assert not far_regions(target, target).any()
+    shadow = np.zeros_like(target)
+    shadow[20:80, 20:80] = True  # fills the notch, misses the ear
+    shadow[20:80, 80:82] = True  # and a sliver 2 px wide along the right edge: within the bar
+    regions = far_regions(shadow, target)
+    notch, ear = np.zeros_like(target), np.zeros_like(target)
+    notch[20:50, 45:51] = True
+    ear[5:20, 30:34] = True
+    assert np.array_equal(regions, notch | ear)
+    assert hd95(shadow, target) > 0.03
+    # Without the notch and the ear only the sliver is wrong, and nothing fails the bar.
+    shadow[20:50, 45:51] = False
+    shadow[5:20, 30:34] = True
+    assert hd95(shadow, target) <= 0.03 and not far_regions(shadow, target).any()

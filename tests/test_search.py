@@ -12,9 +12,10 @@ from handshadow.fit import CONTACTS_EVERY, OUTLINE_THIN, FitConfig, fit_frame, m
 from handshadow.hands.limits import JointLimits
 from handshadow.metrics import rank_key, score
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
-from handshadow.search import Finishing, Hops, Interrupted, Stage, finishing, hop, objective, polish, separate
+from handshadow.search import Finishing, Hops, Interrupted, Stage, Weights, finishing, hop, objective, polish, separate
 from handshadow.search import stages as stages_module
 from handshadow.search.hops import focused_joints
+from handshadow.search.objective import FarOutline, view_objective
 from tests.test_fit import known_target
 
 SIZE = 96
@@ -493,6 +494,10 @@ def test_the_exact_outline_stages_weigh_spills_as_the_polish_does(quality):
             exact = st.blur_px <= 1 and st.skeleton <= 0.05
             want = (OUTLINE_THIN, polish.polish_spill, polish.polish_notches) if exact else (None, None, None)
             assert (st.thin, st.spill, st.notches) == want
+        # Only the polish, which runs on a result that fails, weighs the wrong regions past the
+        # HD95 bar; the stages do not (their passes stay as they were).
+        assert all(st.weights(Weights()).far == 0 for st in stages)
+        assert polish.polish_weights(Weights()).far == polish.polish_far > 0
 
 
 def _near_miss(truth):
@@ -697,3 +702,30 @@ def test_the_starts_stay_diverse_at_most_two_per_library_pose_and_a_share_from_t
     assert kinds.count("library") == PER_LIBRARY_POSE and picked[1:3] == [0, 1]
     assert kinds.count("atlas") == round(ATLAS_SHARE * n_keep)
     assert all(origins[i].kind == "random" for i in picked[3 + round(ATLAS_SHARE * n_keep) :])
+
+
+def test_the_far_weight_pulls_hardest_where_the_outline_fails_the_hd95_bar():
+    problem, truth = _problem_and_truth()
+    bent = _bent(truth, finger=1, by=1.2)  # the index curled in: the target's index is missing
+    both = PoseBatch(
+        [HandPoseBatch(*(torch.cat(ab) for ab in zip(t.args(), b.args()))) for t, b in zip(truth.hands, bent.hands)]
+    )
+    stage = Finishing().stage(SIZE, 1)
+    grads, images = {}, {}
+    for weight in (0.0, 6.0):
+        params = PoseParameters(both, problem.limits)
+        far = FarOutline(every=10, weight=weight)
+        weights = dataclasses.replace(problem.weights, far=weight)
+        terms, shadows = view_objective(problem, params.hands(), stage, weights, far=far)
+        terms.image.sum().backward()
+        grads[weight] = params.hand_parameters(0)[0].grad[1].norm(dim=1)  # (15,) per joint of the bent pose
+        images[weight] = terms.image.detach()
+        if weight:
+            # The true pose casts the target: nothing of it fails, so no extra weight.
+            assert float(images[weight][0]) == float(images[0.0][0])
+            assert float(images[weight][1]) > 2 * float(images[0.0][1])
+            # The map holds between its refreshes: another mask in between changes nothing.
+            held = far(0, problem.level(SIZE), torch.zeros_like(shadows[0].mask))
+            assert held is not None and held[1].sum() > 0 and held[0].sum() == 0
+    index = slice(3, 6)
+    assert float(grads[6.0][index].sum()) > 2 * float(grads[0.0][index].sum())

@@ -6,6 +6,7 @@ All functions take binary (H, W) numpy masks (shadow, target) and work in pixels
     boundary_f1      outlines within 2 px of each other, precision and recall combined
     hd95             95th percentile of outline-to-outline distances, both ways, / frame height
     far_outline      the outline pixels beyond the HD95 bar (where a shadow fails it)
+    far_regions      the wrong pixels (shadow XOR target) in regions that reach such a pixel
     thin_recall      share of the target's thin parts covered by the shadow; thin parts are
                      what an opening with a disc of radius 4 % of the frame height removes
 A fit is a success when IoU >= 0.8, thin-part recall >= 0.6 and HD95 <= 0.03.
@@ -169,6 +170,21 @@ def far_outline(shadow: np.ndarray, target: np.ndarray, bar: float = SUCCESS_HD9
     far[o.shadow] = o.shadow_to_target > limit
     far[o.target] |= o.target_to_shadow > limit
     return far
+
+
+def far_regions(shadow: np.ndarray, target: np.ndarray, bar: float = SUCCESS_HD95) -> np.ndarray:
+    """(H, W) bool: the connected regions of wrong pixels (shadow XOR target, 4-connected)
+    that touch an outline pixel beyond ``bar`` (:func:`far_outline`; 4-neighbours):
+    the whole filled notch or hole, missing part or spill that fails the HD95 bar, and none
+    of the slivers along the outline that pass it."""
+    shadow, target = np.asarray(shadow, bool), np.asarray(target, bool)
+    far = far_outline(shadow, target, bar)
+    if not far.any():
+        return np.zeros(shadow.shape, bool)
+    wrong = shadow ^ target
+    labels, _ = ndimage.label(wrong)
+    hit = np.unique(labels[ndimage.binary_dilation(far) & wrong])
+    return np.isin(labels, hit[hit > 0])
 
 
 def thin_parts(target: np.ndarray) -> np.ndarray:

@@ -20,9 +20,9 @@ from handshadow.hands.penetration import contact_penalty, hand_parts
 from handshadow.metrics import ViewScores
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
 from handshadow.scene import RESULT_MARGIN_M
-from handshadow.search.config import CONTACT_SIDEWAYS, Finishing
+from handshadow.search.config import CONTACT_SIDEWAYS, FAR_EVERY, Finishing
 from handshadow.search.loop import optimise
-from handshadow.search.objective import view_objective
+from handshadow.search.objective import FarOutline, view_objective
 from handshadow.search.problem import Problem
 
 log = logging.getLogger(__name__)
@@ -217,9 +217,10 @@ def polish_round(
     jitter(params, settings.jitter, generator)
     best = {"score": best_score, "key": best_score.key(), "poses": poses}
     keep_holdable = problem.holdable(poses)[0]  # a pose whose arms can be held never gives that up
+    far = FarOutline(FAR_EVERY, weights.far)
 
     def evaluate():
-        terms, shadows = view_objective(problem, params.hands(), stage, weights)
+        terms, shadows = view_objective(problem, params.hands(), stage, weights, far=far)
         return terms.total, shadows
 
     def look(step, shadows):

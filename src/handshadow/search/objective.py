@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import torch
 
 from handshadow import losses
@@ -24,6 +25,7 @@ from handshadow.hands.arms import BACK_SLACK_M
 from handshadow.hands.kinematics import rotmat_to_rotvec
 from handshadow.hands.penetration import Contacts, contact_penalty
 from handshadow.hands.rig import KEYPOINT_NAMES
+from handshadow.metrics import far_regions
 from handshadow.poses import HandPoseBatch
 from handshadow.render import Shadow, gaussian_blur
 from handshadow.scene import Scene
@@ -91,6 +93,37 @@ class ExactContacts:
         return self.found
 
 
+class FarOutline:
+    """Per-pixel extra weights (B, H, W) for the image term where a shadow fails the HD95 bar:
+    the error regions (shadow XOR target) that touch an outline pixel farther than the bar
+    from the other outline (metrics.far_outline: a part missing or added, a notch or hole
+    filled). The HD95 counts outline pixels, so a small region past the bar fails a fit that
+    much larger shallow errors would not; the image term alone weighs it by its area. Found
+    afresh from the exact masks every ``every`` evaluations per view and held in between
+    (every = 0 or weight 0: off)."""
+
+    def __init__(self, every: int, weight: float):
+        self.every, self.weight, self.calls = every, weight, {}
+        self.maps: dict[int, torch.Tensor | None] = {}
+
+    def __call__(self, view: int, level: Level, mask: torch.Tensor) -> torch.Tensor | None:
+        """(B, H, W) extra weights for the view's masks (B, H, W) at a level, or None."""
+        if not (self.every and self.weight) or level.scale != 1.0:
+            return None
+        calls = self.calls.get(view, 0)
+        if calls % self.every == 0:
+            self.maps[view] = self._find(level, mask.detach())
+        self.calls[view] = calls + 1
+        return self.maps[view]
+
+    def _find(self, level: Level, mask: torch.Tensor) -> torch.Tensor | None:
+        target = level.maps.target.cpu().numpy() > 0.5
+        regions = np.stack([far_regions(m, target) for m in mask.cpu().numpy() > 0.5])
+        if not regions.any():
+            return None
+        return torch.as_tensor(regions, dtype=mask.dtype, device=mask.device) * self.weight
+
+
 def objective(
     problem: Problem, hands: list[HandPoseBatch], stage: Stage, weights: Weights | None = None
 ) -> tuple[LossTerms, Shadow]:
@@ -107,6 +140,7 @@ def view_objective(
     stage: Stage,
     weights: Weights | None = None,
     contacts: ExactContacts | None = None,
+    far: FarOutline | None = None,
 ) -> tuple[LossTerms, list[Shadow]]:
     """The loss terms of B hypotheses at a stage over all the problem's views, and their exact
     shadow per view at the stage's resolution. weights: the problem's unless given, with the
@@ -119,7 +153,7 @@ def view_objective(
     w = stage.weights(weights or problem.weights)
     outs = problem.pose(hands)
     levels = [problem.level(stage.height, k) for k in range(len(problem.views))]
-    views = [_view_image_terms(level, outs, stage, w) for level in levels]
+    views = [_view_image_terms(level, outs, stage, w, far, k) for k, level in enumerate(levels)]
     shadows = [shadow for _, shadow in views]
     zero = shadows[0].mask.new_zeros(shadows[0].mask.shape[0])
     anchor = w.anchor * anchor_distance(hands, problem.anchor.hands) if problem.anchor is not None else zero
@@ -170,7 +204,9 @@ def _summed(values: list[torch.Tensor]) -> torch.Tensor:
     return out
 
 
-def _view_image_terms(level: Level, outs, stage: Stage, w: Weights) -> tuple[dict[str, torch.Tensor], Shadow]:
+def _view_image_terms(
+    level: Level, outs, stage: Stage, w: Weights, far: FarOutline | None = None, view: int = 0
+) -> tuple[dict[str, torch.Tensor], Shadow]:
     """One view's image terms but the excess (image, gaps, attraction, inside, thin_pull,
     each (B,) and weighted as Weights says, not by the view's weight) and its exact shadow at
     the level's resolution."""
@@ -178,7 +214,12 @@ def _view_image_terms(level: Level, outs, stage: Stage, w: Weights) -> tuple[dic
     mask, maps = shadow.mask, level.maps
     zero = mask.new_zeros(mask.shape[0])
     blur = stage.blur_px * level.scale
-    image = w.l2 * losses.weighted_l2(gaussian_blur(mask, blur), *_image_maps(level, blur, w))
+    blurred = gaussian_blur(mask, blur)
+    target, weight = _image_maps(level, blur, w)
+    extra = far(view, level, mask) if far is not None else None
+    if extra is not None:
+        weight = weight + extra
+    image = w.l2 * losses.weighted_l2(blurred, target, weight)
     gaps = zero
     if w.gaps and stage.blur_px <= 1:
         gaps = w.gaps * losses.gaps(mask, maps.target, max(1, round(2 * level.scale)))

@@ -13,10 +13,10 @@ import torch
 
 from handshadow.metrics import iou
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
-from handshadow.search.config import Stage
+from handshadow.search.config import FAR_EVERY, Stage
 from handshadow.search.finishing import pass_in_front
 from handshadow.search.loop import optimise
-from handshadow.search.objective import ExactContacts, view_objective
+from handshadow.search.objective import ExactContacts, FarOutline, view_objective
 from handshadow.search.problem import Problem
 
 log = logging.getLogger(__name__)
@@ -83,9 +83,10 @@ def run_stages(
             params = PoseParameters(poses, problem.limits)
 
             contacts = ExactContacts(problem, stage.contacts_every)
+            far = FarOutline(FAR_EVERY, stage.weights(problem.weights).far)
 
-            def evaluate(stage=stage, params=params, contacts=contacts):
-                terms, shadows = view_objective(problem, params.hands(), stage, contacts=contacts)
+            def evaluate(stage=stage, params=params, contacts=contacts, far=far):
+                terms, shadows = view_objective(problem, params.hands(), stage, contacts=contacts, far=far)
                 return terms.total, (terms, shadows)
 
             def after(step, seen, si=si, stage=stage, params=params):
