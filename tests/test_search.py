@@ -714,7 +714,7 @@ def test_the_far_weight_pulls_hardest_where_the_outline_fails_the_hd95_bar():
     grads, images = {}, {}
     for weight in (0.0, 6.0):
         params = PoseParameters(both, problem.limits)
-        far = FarOutline(every=10, weight=weight)
+        far = FarOutline(every=10)
         weights = dataclasses.replace(problem.weights, far=weight)
         terms, shadows = view_objective(problem, params.hands(), stage, weights, far=far)
         terms.image.sum().backward()

@@ -217,7 +217,7 @@ def polish_round(
     jitter(params, settings.jitter, generator)
     best = {"score": best_score, "key": best_score.key(), "poses": poses}
     keep_holdable = problem.holdable(poses)[0]  # a pose whose arms can be held never gives that up
-    far = FarOutline(FAR_EVERY, weights.far)
+    far = FarOutline(FAR_EVERY)
 
     def evaluate():
         terms, shadows = view_objective(problem, params.hands(), stage, weights, far=far)

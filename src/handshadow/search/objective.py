@@ -94,21 +94,21 @@ class ExactContacts:
 
 
 class FarOutline:
-    """Per-pixel extra weights (B, H, W) for the image term where a shadow fails the HD95 bar:
-    the error regions (shadow XOR target) that touch an outline pixel farther than the bar
-    from the other outline (metrics.far_outline: a part missing or added, a notch or hole
-    filled). The HD95 counts outline pixels, so a small region past the bar fails a fit that
-    much larger shallow errors would not; the image term alone weighs it by its area. Found
-    afresh from the exact masks every ``every`` evaluations per view and held in between
-    (every = 0 or weight 0: off)."""
+    """Where a shadow fails the HD95 bar, for the image term's extra weight (Weights.far): the
+    wrong regions (shadow XOR target) that touch an outline pixel farther than the bar from the
+    other outline (metrics.far_regions: a part missing or added, a notch or hole filled), as
+    (B, H, W) 0/1 maps. The HD95 counts outline pixels, so a small region past the bar fails a
+    fit that much larger shallow errors would not; the image term alone weighs it by its area.
+    Found afresh from the exact masks every ``every`` evaluations per view, at full resolution,
+    and held in between (every = 0: never)."""
 
-    def __init__(self, every: int, weight: float):
-        self.every, self.weight, self.calls = every, weight, {}
+    def __init__(self, every: int):
+        self.every, self.calls = every, {}
         self.maps: dict[int, torch.Tensor | None] = {}
 
     def __call__(self, view: int, level: Level, mask: torch.Tensor) -> torch.Tensor | None:
-        """(B, H, W) extra weights for the view's masks (B, H, W) at a level, or None."""
-        if not (self.every and self.weight) or level.scale != 1.0:
+        """(B, H, W) regions of the view's masks (B, H, W) at a level, or None (none, or off)."""
+        if not self.every or level.scale != 1.0:
             return None
         calls = self.calls.get(view, 0)
         if calls % self.every == 0:
@@ -121,7 +121,7 @@ class FarOutline:
         regions = np.stack([far_regions(m, target) for m in mask.cpu().numpy() > 0.5])
         if not regions.any():
             return None
-        return torch.as_tensor(regions, dtype=mask.dtype, device=mask.device) * self.weight
+        return torch.as_tensor(regions, dtype=mask.dtype, device=mask.device)
 
 
 def objective(
@@ -147,7 +147,8 @@ def view_objective(
     stage's own where it sets them (Stage.weights). The image terms (image, excess, gaps,
     attraction, inside, thin_pull) are each view's weighted by its weight; placement and the
     arms' rules hold in every view (summed); penetration, contacts, reach and the anchor are
-    counted once. contacts: the stage's exact mesh contacts (None: that term is zero). With
+    counted once. contacts: the stage's exact mesh contacts (None: that term is zero). far: the
+    wrong regions past the HD95 bar that Weights.far weighs (None: that weight is off). With
     one view this is the single-view objective exactly (its terms are built in the same
     order, so even the gradients' rounding is the same)."""
     w = stage.weights(weights or problem.weights)
@@ -216,9 +217,9 @@ def _view_image_terms(
     blur = stage.blur_px * level.scale
     blurred = gaussian_blur(mask, blur)
     target, weight = _image_maps(level, blur, w)
-    extra = far(view, level, mask) if far is not None else None
-    if extra is not None:
-        weight = weight + extra
+    regions = far(view, level, mask) if far is not None and w.far else None
+    if regions is not None:
+        weight = weight + w.far * regions
     image = w.l2 * losses.weighted_l2(blurred, target, weight)
     gaps = zero
     if w.gaps and stage.blur_px <= 1:

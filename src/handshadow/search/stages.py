@@ -83,7 +83,7 @@ def run_stages(
             params = PoseParameters(poses, problem.limits)
 
             contacts = ExactContacts(problem, stage.contacts_every)
-            far = FarOutline(FAR_EVERY, stage.weights(problem.weights).far)
+            far = FarOutline(FAR_EVERY)
 
             def evaluate(stage=stage, params=params, contacts=contacts, far=far):
                 terms, shadows = view_objective(problem, params.hands(), stage, contacts=contacts, far=far)
