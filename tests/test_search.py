@@ -584,6 +584,29 @@ def test_a_hop_never_trades_arms_that_can_be_held_for_arms_that_cannot(monkeypat
     assert hop(problem, "start", [], lambda p: next(results), 2) == "start"
 
 
+def test_only_the_last_hop_weighs_the_wrong_regions_past_the_hd95_bar(monkeypatch):
+    from handshadow.search import hops as hops_module
+
+    # Every hop ranks worse than the start, so all three run and the start stays.
+    problem = _ScriptedProblem({"start": (3, 0.0, True), "hopped": (4, 0.0, True)})
+    weighed = []
+
+    def run_stages(p, copies, stages, *a, **k):
+        weighed.append([st.weights(Weights()).far for st in stages])
+        return SimpleNamespace(poses=copies, interrupted=False)
+
+    monkeypatch.setattr(hops_module, "_copies", lambda problem, best, *a: best)
+    monkeypatch.setattr(hops_module, "run_stages", run_stages)
+    fine = [Stage(height=SIZE, blur_px=b, attract_px=0, steps=1, keep=1) for b in (1, 0)]
+    settings = Hops(far=6.0, far_hops=1)
+    assert hop(problem, "start", fine, lambda p: "hopped", 3, settings) == "start"
+    assert weighed == [[0.0, 0.0], [0.0, 0.0], [6.0, 6.0]]
+    weighed.clear()
+    assert hop(problem, "start", fine, lambda p: "hopped", 2, dataclasses.replace(settings, far_hops=2)) == "start"
+    assert weighed == [[6.0, 6.0], [6.0, 6.0]]
+    assert fine[0].far is None  # the caller's stages are left as they were
+
+
 def test_a_stopped_hop_hands_back_the_pose_it_started_from():
     problem, truth = _problem_and_truth()
     near = _near_miss(truth)

@@ -25,8 +25,9 @@ class Stage:
     skeleton terms (long-range guides: joints inside the target, fingers to thin parts);
     contacts_every: how often the exact mesh test (hands.penetration) finds the vertices
     inside other flesh for the objective's contacts term (0: the term is off); thin, spill,
-    notches: the image term's extra weights on the target's thin parts, outside it and on its
-    holes and notches at this stage (None: the Weights' own); layer: after
+    notches, far: the image term's extra weights on the target's thin parts, outside it, on its
+    holes and notches and on the wrong regions past the HD95 bar at this stage (None: the
+    Weights' own); layer: after
     the stage, each kept hypothesis whose hands pass through each other has one put in front
     of the other along the light's rays, so the stages after it fit the shadow with the hands
     apart instead of the separation pushing them apart at the end (one view only)."""
@@ -43,11 +44,12 @@ class Stage:
     thin: float | None = None  # Weights.thin at this stage (None: as the weights say)
     spill: float | None = None  # Weights.spill at this stage (None: as the weights say)
     notches: float | None = None  # Weights.notches at this stage (None: as the weights say)
+    far: float | None = None  # Weights.far at this stage (None: as the weights say)
 
     def weights(self, w: Weights) -> Weights:
-        """The weights this stage optimises with: w, with the stage's thin, spill and notches
-        weights where set."""
-        changes = {k: getattr(self, k) for k in ("thin", "spill", "notches") if getattr(self, k) is not None}
+        """The weights this stage optimises with: w, with the stage's thin, spill, notches and
+        far weights where set."""
+        changes = {k: getattr(self, k) for k in ("thin", "spill", "notches", "far") if getattr(self, k) is not None}
         return dataclasses.replace(w, **changes) if changes else w
 
 
@@ -188,3 +190,8 @@ class Hops:
     focused: int = 3  # of the copies, this many jitter only the fingers near the failing outline
     focus_jitter: float = 1.0  # their joints' jitter, logits
     focus_share: float = 0.05  # a finger within this share of the frame height of it is near
+    # The last far_hops hops weigh the wrong regions past the HD95 bar this much more in their
+    # stages (Stage.far, objective.FarOutline); the hops before them do not, so the plain hops'
+    # passes stay (README, **A far hop**).
+    far: float = 6.0
+    far_hops: int = 1

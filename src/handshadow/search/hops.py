@@ -9,8 +9,11 @@ quality the two at full resolution) and finishes the best as the fit does (``fin
 separation, polish). A few of the copies
 jitter only the fingers whose shadow lies where the outline fails the HD95 bar
 (metrics.far_outline: a part missing or added, a hole filled, light leaking through),
-harder, and leave the rest of the pose as it is (``focused_joints``). The result is kept
-only when it ranks better and is no less performable; hops end at the first success.
+harder, and leave the rest of the pose as it is (``focused_joints``). The last hop
+(config.Hops.far_hops) weighs the wrong regions past the HD95 bar more in its stages
+(objective.FarOutline, as the polish does): when the plain hops could not leave the basin, it
+aims at what fails the bar. The result is kept only when it ranks better and is no less
+performable; hops end at the first success.
 """
 
 from __future__ import annotations
@@ -73,7 +76,13 @@ def hop(
                 break
             log.info("within reach (%s): hop %d of %d", score, i + 1, rounds)
             tell = None if progress is None else functools.partial(_told, progress, i + 1, rounds)
-            found = run_stages(problem, _copies(problem, best, settings, generator), stages, tell, stop=stop)
+            found = run_stages(
+                problem,
+                _copies(problem, best, settings, generator),
+                hop_stages(stages, settings, i, rounds),
+                tell,
+                stop=stop,
+            )
             if found.interrupted:
                 raise Interrupted(best)
             out = finish(found.poses)
@@ -89,6 +98,13 @@ def hop(
     except (KeyboardInterrupt, Interrupted):  # a half-finished hop may still overlap: the best so far is kept
         raise Interrupted(best) from None
     return best
+
+
+def hop_stages(stages: list[Stage], settings: Hops, i: int, rounds: int) -> list[Stage]:
+    """The stages of hop i (0 first) of ``rounds``: the last ``settings.far_hops`` hops weigh the
+    wrong regions past the HD95 bar by ``settings.far`` (Stage.far), the others not at all."""
+    far = settings.far if i >= rounds - settings.far_hops else 0.0
+    return [dataclasses.replace(st, far=far) for st in stages]
 
 
 def _told(progress: Callable[[Progress], None], hop: int, hops: int, p: Progress) -> None:
