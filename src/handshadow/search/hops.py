@@ -101,10 +101,12 @@ def hop(
 
 
 def hop_stages(stages: list[Stage], settings: Hops, i: int, rounds: int) -> list[Stage]:
-    """The stages of hop i (0 first) of ``rounds``: the last ``settings.far_hops`` hops weigh the
-    wrong regions past the HD95 bar by ``settings.far`` (Stage.far), the others not at all."""
-    far = settings.far if i >= rounds - settings.far_hops else 0.0
-    return [dataclasses.replace(st, far=far) for st in stages]
+    """The stages of hop i (0 first) of ``rounds``: for the last ``settings.far_hops`` hops they
+    weigh the wrong regions past the HD95 bar by ``settings.far`` (Stage.far); the other hops
+    run them as they are."""
+    if i < rounds - settings.far_hops:
+        return stages
+    return [dataclasses.replace(st, far=settings.far) for st in stages]
 
 
 def _told(progress: Callable[[Progress], None], hop: int, hops: int, p: Progress) -> None:
