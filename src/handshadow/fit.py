@@ -91,7 +91,7 @@ SKIP_TRIED = True  # a later attempt leaves out the library and atlas starts an 
 # 2 hops turned 5 into successes, each in its first attempt; reaching HD95 0.06 rather than
 # 0.04 passed 3 of 31 farther failures (README, Hops). A third hop, weighing the wrong regions
 # past the HD95 bar (config.Hops.far_hops), passed 4 of 18 first attempts that two hops left
-# within reach; a third plain hop 3 (README, **A far hop**).
+# within reach; three plain hops passed 3 (README, **A far hop**).
 HOPS = {"fast": 0, "default": 3, "best": 4}
 
 

@@ -190,8 +190,8 @@ class Hops:
     focused: int = 3  # of the copies, this many jitter only the fingers near the failing outline
     focus_jitter: float = 1.0  # their joints' jitter, logits
     focus_share: float = 0.05  # a finger within this share of the frame height of it is near
-    # The last far_hops hops weigh the wrong regions past the HD95 bar this much more in their
-    # stages (Stage.far, objective.FarOutline); the hops before them do not, so the plain hops'
-    # passes stay (README, **A far hop**).
-    far: float = 6.0
+    # The last far_hops hops weigh the wrong regions past the HD95 bar as much more in their
+    # stages as the polish does (Stage.far, objective.FarOutline); the hops before them do not,
+    # so the plain hops' passes stay (README, **A far hop**).
+    far: float = Finishing.polish_far
     far_hops: int = 1
