@@ -12,7 +12,19 @@ from handshadow.fit import CONTACTS_EVERY, OUTLINE_THIN, FitConfig, fit_frame, m
 from handshadow.hands.limits import JointLimits
 from handshadow.metrics import rank_key, score
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
-from handshadow.search import Finishing, Hops, Interrupted, Stage, Weights, finishing, hop, objective, polish, separate
+from handshadow.search import (
+    Finishing,
+    GiveUp,
+    Hops,
+    Interrupted,
+    Stage,
+    Weights,
+    finishing,
+    hop,
+    objective,
+    polish,
+    separate,
+)
 from handshadow.search import stages as stages_module
 from handshadow.search.hops import focused_joints
 from handshadow.search.objective import FarOutline, view_objective
@@ -752,3 +764,42 @@ def test_the_far_weight_pulls_hardest_where_the_outline_fails_the_hd95_bar():
             assert held is not None and held[1].sum() > 0 and held[0].sum() == 0
     index = slice(3, 6)
     assert float(grads[6.0][index].sum()) > 2 * float(grads[0.0][index].sum())
+
+
+def test_out_of_reach_is_no_hypothesis_near_the_success_test():
+    problem, truth = _problem_and_truth()
+    give_up = GiveUp()
+    assert not stages_module.out_of_reach(problem, truth, give_up)  # the pose that cast the target
+    far = _moved(truth, dx=0.12)
+    assert not problem.scores(far)[0].scores[0].success and stages_module.out_of_reach(problem, far, give_up)
+    both = PoseBatch(
+        [HandPoseBatch(*(torch.cat(t) for t in zip(a.args(), b.args()))) for a, b in zip(far.hands, truth.hands)]
+    )
+    assert not stages_module.out_of_reach(problem, both, give_up)  # one hypothesis within reach is enough
+
+
+def test_an_attempt_out_of_reach_gives_up_for_a_fresh_one_and_the_last_always_finishes(monkeypatch):
+    from handshadow import fit as fit_module
+
+    target = np.zeros((64, 64), bool)  # nine squares apart: no hand casts them
+    for r in (8, 28, 48):
+        for c in (8, 28, 48):
+            target[r : r + 8, c : c + 8] = True
+    base = FitConfig(hands="1", size=64, quality="default", iters=12)
+    monkeypatch.setitem(fit_module.POLISH_ROUNDS, "default", (0, 0, 1))  # the polish is not what this tests
+    searches = []
+    real = fit_module.run_stages
+    monkeypatch.setattr(
+        fit_module, "run_stages", lambda *a, **k: searches.append((real(*a, **k), k)) or searches[-1][0]
+    )
+    result = fit_frame(target, dataclasses.replace(base, attempts=2))
+    # The first attempt stopped after the 128 px stage (here 64 px, the frame's height), unfinished.
+    _, _, stages = schedule("default", 12, 64)
+    after = fit_module.GIVE_UP["default"].after_stage
+    assert [s.gave_up for s, _ in searches] == [True, False]
+    assert searches[0][0].steps == sum(st.steps for st in stages[: after + 1]) < searches[1][0].steps
+    # The second, the last, always finishes: its result is the fit's.
+    assert searches[1][1]["give_up"] is None
+    assert result.posed.fit["attempt"] == 2 and result.posed.fit["attempts_run"] == 2
+    assert result.steps == searches[0][0].steps + searches[1][0].steps == result.posed.fit["iterations"]
+    assert result.penetration.performable()

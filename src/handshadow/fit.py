@@ -31,6 +31,7 @@ from handshadow.poses import PoseBatch, PosedScene
 from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, Scene, check_view_angle, default_views
 from handshadow.search import (
     Finishing,
+    GiveUp,
     Hops,
     Interrupted,
     Problem,
@@ -93,6 +94,10 @@ SKIP_TRIED = True  # a later attempt leaves out the library and atlas starts an 
 # past the HD95 bar (config.Hops.far_hops), passed 4 of 18 first attempts that two hops left
 # within reach; three plain hops passed 3 (README, **A far hop**).
 HOPS = {"fast": 0, "default": 3, "best": 4}
+# An attempt that is not the last stops after the 128 px stage when every hypothesis there is
+# out of reach (search.config.GiveUp), and the next starts afresh: the stages, finishing steps
+# and hops after it cost 15 s or more and would not pass. Fast makes one attempt.
+GIVE_UP = {"fast": None, "default": GiveUp(), "best": GiveUp()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -360,13 +365,24 @@ def fit_frame(
             break
         tell = None if progress is None else (lambda p, k=k: progress(dataclasses.replace(p, attempt=k)))
         attempt = dataclasses.replace(config, seed=config.seed + k)
+        give_up = GIVE_UP[config.quality] if k + 1 < attempts else None  # the last attempt always finishes
         try:
-            result = _attempt(targets, scenes, attempt, tell, extra_starts, anchor, stop, left, tried)
+            result = _attempt(targets, scenes, attempt, tell, extra_starts, anchor, stop, left, tried, give_up)
         except KeyboardInterrupt:  # Ctrl-C while a later attempt sets up: the best so far stands
             if best is None:
                 raise
             interrupted = True
             break
+        except GaveUp as early:
+            runs += 1
+            steps += early.steps
+            log.info(
+                "attempt %d of %d out of reach after its stage %d: a fresh start",
+                k + 1,
+                attempts,
+                give_up.after_stage + 1,
+            )
+            continue
         runs += 1
         steps += result.steps
         interrupted = interrupted or result.interrupted
@@ -438,11 +454,23 @@ def _skip_attempt(targets, scenes, config, extra_starts, anchor, tried: dict[int
         _prepare(targets, scenes, n, config, extra_starts, anchor, tried.setdefault(n, set()))
 
 
-def _attempt(targets, scenes, config, progress, extra_starts, anchor, stop, limit, tried=None) -> FitResult:
+class GaveUp(Exception):
+    """An attempt's searches all stopped out of reach (search.config.GiveUp), after ``steps``
+    steps: there is no result to finish."""
+
+    def __init__(self, steps: int):
+        super().__init__(f"out of reach after {steps} steps")
+        self.steps = steps
+
+
+def _attempt(
+    targets, scenes, config, progress, extra_starts, anchor, stop, limit, tried=None, give_up: GiveUp | None = None
+) -> FitResult:
     """One attempt: a search per hand count, the chosen one finished and measured. ``limit``
     bounds its search and polish in seconds (None: no limit). ``tried``: per hand count, the
     library and atlas starts earlier attempts searched (search.starts.start_key); they are
-    left out, and this attempt's are added."""
+    left out, and this attempt's are added. ``give_up``: a search may stop out of reach
+    (search.stages.run_stages); when every one does, raises GaveUp."""
     t0 = time.perf_counter()
     counts = hand_counts(config, extra_starts if extra_starts is not None else anchor)
     searches = []
@@ -450,10 +478,15 @@ def _attempt(targets, scenes, config, progress, extra_starts, anchor, stop, limi
         seen = set() if tried is None else tried.setdefault(n, set())
         # Each hand count gets an equal share of what is left of the limit, from its own set-up on.
         deadline = (limit - (time.perf_counter() - t0)) / (len(counts) - i) if limit else None
-        searches.append(_search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop, seen))
+        searches.append(
+            _search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop, seen, give_up)
+        )
         if searches[-1].search.interrupted:
             break
-    chosen = min(searches, key=HandCountFit.preference_key)
+    reached = [s for s in searches if not s.search.gave_up]
+    if not reached:
+        raise GaveUp(sum(s.search.steps for s in searches))
+    chosen = min(reached, key=HandCountFit.preference_key)
     poses, finish_interrupted = _finish(chosen, config, stop, t0, limit, progress)
     steps = sum(s.search.steps for s in searches)
     interrupted = finish_interrupted or any(s.search.interrupted for s in searches)
@@ -662,13 +695,23 @@ def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1
 
 
 def _search(
-    targets, scenes, n_hands, config, progress, deadline, extra_starts=None, anchor=None, stop=None, tried=None
+    targets,
+    scenes,
+    n_hands,
+    config,
+    progress,
+    deadline,
+    extra_starts=None,
+    anchor=None,
+    stop=None,
+    tried=None,
+    give_up: GiveUp | None = None,
 ):
     t0 = time.perf_counter()  # the deadline (seconds) counts the set-up too
     problem, starts, stages = _prepare(targets, scenes, n_hands, config, extra_starts, anchor, tried)
     if deadline is not None:
         deadline -= time.perf_counter() - t0
-    res = run_stages(problem, starts, stages, progress=progress, deadline_s=deadline, stop=stop)
+    res = run_stages(problem, starts, stages, progress=progress, deadline_s=deadline, stop=stop, give_up=give_up)
     return HandCountFit(n_hands, ["right", "left"][:n_hands], problem, res)
 
 

@@ -6,10 +6,11 @@
     objective.py  objective(): named loss terms (LossTerms) of hypotheses at a stage
     loop.py       optimise(): the one Adam loop
     starts.py     library poses and random hands, aligned to the target in 2D
-    stages.py     run_stages(): coarse to fine, ranked and pruned after each stage
+    stages.py     run_stages(): coarse to fine, ranked and pruned after each stage (and
+                  stopped early when every hypothesis is out of reach)
     finishing.py  separate(), polish(), keep_between_light_and_wall()
     hops.py       hop(): a close miss's fine stages again from harder-jittered copies
-    config.py     the numbers: Stage, Weights, LearningRates, Reach, Finishing, Hops
+    config.py     the numbers: Stage, Weights, LearningRates, Reach, Finishing, Hops, GiveUp
 
 A hypothesis is one or two hands (poses.PoseBatch). Joint angles stay inside their limits by
 construction (poses.PoseParameters); rotations are a rotation vector applied in world axes on
@@ -17,7 +18,7 @@ top of the start's rotation; translations are metres. Ranking is by the fit meas
 (metrics.rank_key; with several views metrics.ViewScores: every view's together).
 """
 
-from handshadow.search.config import Finishing, Hops, LearningRates, Reach, Stage, Weights
+from handshadow.search.config import Finishing, GiveUp, Hops, LearningRates, Reach, Stage, Weights
 from handshadow.search.finishing import Interrupted, keep_between_light_and_wall, polish, separate
 from handshadow.search.hops import hop
 from handshadow.search.objective import LossTerms, objective, view_objective
@@ -26,6 +27,7 @@ from handshadow.search.stages import Progress, SearchResult, run_stages
 
 __all__ = [
     "Finishing",
+    "GiveUp",
     "Hops",
     "Interrupted",
     "LearningRates",

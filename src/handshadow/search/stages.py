@@ -11,9 +11,9 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
-from handshadow.metrics import iou
+from handshadow.metrics import SUCCESS_HD95, SUCCESS_IOU, iou
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
-from handshadow.search.config import FAR_EVERY, Stage
+from handshadow.search.config import FAR_EVERY, GiveUp, Stage
 from handshadow.search.finishing import pass_in_front
 from handshadow.search.loop import optimise
 from handshadow.search.objective import ExactContacts, FarOutline, view_objective
@@ -48,13 +48,15 @@ class Progress:
 @dataclasses.dataclass
 class SearchResult:
     """poses: the best hypothesis (batch 1); steps taken; seconds; whether Ctrl-C or ``stop``
-    ended it; ranking: per surviving hypothesis its index, measures and rank key, best first."""
+    ended it; ranking: per surviving hypothesis its index, measures and rank key, best first;
+    gave_up: the stages stopped early with every survivor out of reach (:func:`out_of_reach`)."""
 
     poses: PoseBatch
     steps: int
     seconds: float
     interrupted: bool
     ranking: list[dict]
+    gave_up: bool = False
 
     @property
     def key(self) -> tuple:
@@ -69,13 +71,15 @@ def run_stages(
     every: int = 10,
     deadline_s: float | None = None,
     stop: Callable[[], bool] | None = None,
+    give_up: GiveUp | None = None,
 ) -> SearchResult:
     """Optimise the starting hypotheses through the stages, keeping each stage's best.
     Ctrl-C (KeyboardInterrupt), ``stop`` returning True (checked every step) or the deadline
-    ends it early with the best so far."""
+    ends it early with the best so far. With ``give_up``, the stages end after its stage when
+    every survivor is out of reach there (:func:`out_of_reach`; SearchResult.gave_up)."""
     t0 = time.perf_counter()
     total = sum(s.steps for s in stages)
-    done, interrupted = 0, False
+    done, interrupted, gave_up = 0, False, False
     poses = starts
     try:
         for si, stage in enumerate(stages):
@@ -112,6 +116,11 @@ def run_stages(
                 poses = params.poses()
             keep = min(stage.keep, poses.batch)
             poses = poses.select(rank_at(problem, poses, stage.height)[:keep])
+            if give_up is not None and si == give_up.after_stage and si < len(stages) - 1:
+                if out_of_reach(problem, poses, give_up):
+                    log.info("stage %d of %d: every hypothesis out of reach, the stages end here", si + 1, len(stages))
+                    gave_up = True
+                    break
             if stage.layer:
                 poses = layered(problem, poses)
     except KeyboardInterrupt:
@@ -119,7 +128,15 @@ def run_stages(
     except TimeoutError:
         log.info("search stopped at its time limit")
     ranking = rank_details(problem, poses)
-    return SearchResult(poses.item(ranking[0]["index"]), done, time.perf_counter() - t0, interrupted, ranking)
+    return SearchResult(poses.item(ranking[0]["index"]), done, time.perf_counter() - t0, interrupted, ranking, gave_up)
+
+
+def out_of_reach(problem: Problem, poses: PoseBatch, give_up: GiveUp) -> bool:
+    """Whether no hypothesis, measured at full resolution in every view, has an IoU at most
+    ``give_up.iou_margin`` short of the success test's bar and an HD95 at most
+    ``give_up.hd95_margin`` (a share of the frame height) past its bar."""
+    lowest_iou, highest_hd95 = SUCCESS_IOU - give_up.iou_margin, SUCCESS_HD95 + give_up.hd95_margin
+    return not any(all(v.iou >= lowest_iou and v.hd95 <= highest_hd95 for v in s.scores) for s in problem.scores(poses))
 
 
 def layered(problem: Problem, poses: PoseBatch) -> PoseBatch:
