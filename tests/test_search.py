@@ -778,6 +778,25 @@ def test_out_of_reach_is_no_hypothesis_near_the_success_test():
     assert not stages_module.out_of_reach(problem, both, give_up)  # one hypothesis within reach is enough
 
 
+@pytest.mark.parametrize(
+    ("iou", "hd95", "reach"),
+    [
+        (0.78, 0.026, True),  # IoU short by less than its margin, the outline met
+        (0.76, 0.026, False),  # IoU short by more
+        (0.85, 0.065, True),  # IoU met, HD95 past its bar by less than its margin
+        (0.85, 0.075, False),  # by more
+        (0.79, 0.045, True),  # short of both, HD95 within the smaller margin
+        (0.79, 0.055, False),  # short of both by more
+    ],
+)
+def test_a_hypothesis_is_within_reach_by_both_measures_but_not_short_of_both(iou, hd95, reach):
+    from handshadow.metrics import FitScore, ViewScores
+
+    scores = [ViewScores((FitScore(iou, 0.5, hd95, 0.0),), (1.0,)), ViewScores((FitScore(0.5, 0.1, 0.2, 0.0),), (1.0,))]
+    problem = SimpleNamespace(scores=lambda poses: scores)
+    assert stages_module.out_of_reach(problem, None, GiveUp()) is not reach
+
+
 def test_an_attempt_out_of_reach_gives_up_for_a_fresh_one_and_the_last_always_finishes(monkeypatch):
     from handshadow import fit as fit_module
 
