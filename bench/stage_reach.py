@@ -21,7 +21,7 @@ from pathlib import Path
 
 import torch
 
-from handshadow.fit import GIVE_UP, FitConfig, _prepare, view_scenes
+from handshadow.fit import GIVE_UP, FitConfig, _prepare, resolve_device, view_scenes
 from handshadow.search import stages as stages_module
 from handshadow.target import load_target
 
@@ -59,7 +59,7 @@ def main() -> None:
     print(f"{len(paths)} targets, seed {args.seed}, GiveUp after stage {give_up.after_stage}")
     with out.open("w") as f:
         for path in paths:
-            config = FitConfig(hands=str(args.hands), seed=args.seed, attempts=1)
+            config = FitConfig(hands=str(args.hands), seed=args.seed, attempts=1, device=resolve_device("auto"))
             target = load_target(path)
             seen.clear()
             t0 = time.perf_counter()

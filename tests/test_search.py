@@ -797,13 +797,18 @@ def test_a_hypothesis_is_within_reach_by_both_measures_but_not_short_of_both(iou
     assert stages_module.out_of_reach(problem, None, GiveUp()) is not reach
 
 
-def test_an_attempt_out_of_reach_gives_up_for_a_fresh_one_and_the_last_always_finishes(monkeypatch):
-    from handshadow import fit as fit_module
-
+def _nine_squares() -> np.ndarray:
     target = np.zeros((64, 64), bool)  # nine squares apart: no hand casts them
     for r in (8, 28, 48):
         for c in (8, 28, 48):
             target[r : r + 8, c : c + 8] = True
+    return target
+
+
+def test_an_attempt_out_of_reach_gives_up_for_a_fresh_one_and_the_last_always_finishes(monkeypatch):
+    from handshadow import fit as fit_module
+
+    target = _nine_squares()
     base = FitConfig(hands="1", size=64, quality="default", iters=12)
     monkeypatch.setitem(fit_module.POLISH_ROUNDS, "default", (0, 0, 1))  # the polish is not what this tests
     searches = []
@@ -822,3 +827,29 @@ def test_an_attempt_out_of_reach_gives_up_for_a_fresh_one_and_the_last_always_fi
     assert result.posed.fit["attempt"] == 2 and result.posed.fit["attempts_run"] == 2
     assert result.steps == searches[0][0].steps + searches[1][0].steps == result.posed.fit["iterations"]
     assert result.penetration.performable()
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "stop"])
+def test_a_ctrl_c_or_stop_after_an_attempt_gave_up_finishes_that_attempt(how, monkeypatch):
+    from handshadow import fit as fit_module
+
+    monkeypatch.setitem(fit_module.POLISH_ROUNDS, "default", (0, 0, 1))
+    config = FitConfig(hands="1", size=64, quality="default", iters=12, attempts=3)
+    searches, calls = [], []
+    real_run, real_choose = fit_module.run_stages, fit_module.choose_starts
+    monkeypatch.setattr(fit_module, "run_stages", lambda *a, **k: searches.append(real_run(*a, **k)) or searches[-1])
+
+    def choose(*a, **k):  # Ctrl-C while the second attempt picks its starts
+        calls.append(1)
+        if how == "ctrl-c" and len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_choose(*a, **k)
+
+    monkeypatch.setattr(fit_module, "choose_starts", choose)
+    stop = (lambda: bool(searches) and searches[-1].gave_up) if how == "stop" else None
+    result = fit_frame(_nine_squares(), config, stop=stop)
+    # The first attempt gave up; no second search ran; the first is finished and kept.
+    assert len(searches) == 1 and searches[0].gave_up and len(calls) == (2 if how == "ctrl-c" else 1)
+    assert result.interrupted and result.posed.fit["interrupted"] is True
+    assert result.posed.fit["attempt"] == 1 and result.posed.fit["attempts_run"] == 1
+    assert result.steps == searches[0].steps and result.penetration.performable()

@@ -239,7 +239,8 @@ def _add_fit_options(
         "--attempts",
         type=int,
         help="fresh starts (seed, seed+1, ...) while the result fails the success test, the best kept; "
-        "an attempt but the last gives up early when it is out of reach (default: 1 fast, 5 default, 6 best)",
+        "with default and best an attempt but the last gives up early when it is out of reach "
+        "(default: 1 fast, 5 default, 6 best)",
     )
     p.add_argument(
         "--hops",

@@ -356,12 +356,13 @@ def fit_frame(
     scenes = view_scenes(targets, config)
     limit = config.time_limit_s or None  # seconds; None or 0: no limit
     best, interrupted, runs, steps = None, False, 0, 0
+    gave_up: tuple | None = None  # the best attempt that gave up so far: (index, GaveUp, its config)
     tried: dict[int, set] = {}  # per hand count, the library and atlas starts searched so far
     for k in range(skipped_attempts(config)):
         _skip_attempt(targets, scenes, dataclasses.replace(config, seed=config.seed + k), extra_starts, anchor, tried)
     for k in range(config.skip_attempts, attempts):
         left = None if limit is None else limit - (time.perf_counter() - t0)
-        if best is not None and left is not None and left <= 0:
+        if (best is not None or gave_up is not None) and left is not None and left <= 0:
             break
         tell = None if progress is None else (lambda p, k=k: progress(dataclasses.replace(p, attempt=k)))
         attempt = dataclasses.replace(config, seed=config.seed + k)
@@ -369,19 +370,21 @@ def fit_frame(
         try:
             result = _attempt(targets, scenes, attempt, tell, extra_starts, anchor, stop, left, tried, give_up)
         except KeyboardInterrupt:  # Ctrl-C while a later attempt sets up: the best so far stands
-            if best is None:
+            if best is None and gave_up is None:
                 raise
             interrupted = True
             break
         except GaveUp as early:
             runs += 1
             steps += early.steps
+            if gave_up is None or early.chosen.preference_key() < gave_up[1].chosen.preference_key():
+                gave_up = (k, early, attempt)
             log.info(
-                "attempt %d of %d out of reach after its stage %d: a fresh start",
-                k + 1,
-                attempts,
-                give_up.after_stage + 1,
+                "attempt %d of %d out of reach after stage %d: a fresh start", k + 1, attempts, give_up.after_stage + 1
             )
+            if stop is not None and stop():
+                interrupted = True
+                break
             continue
         runs += 1
         steps += result.steps
@@ -392,6 +395,17 @@ def fit_frame(
             break
         if k + 1 < attempts:
             log.info("attempt %d of %d failed the success test (%s): a fresh start", k + 1, attempts, result.score)
+    if gave_up is not None and (best is None or best.interrupted):
+        # A Ctrl-C, stop or the time limit came before a later attempt finished: the attempt that
+        # gave up is finished too (separated; not polished after a Ctrl-C or stop), the better kept.
+        k, early, attempt = gave_up
+        halt = (lambda: True) if interrupted else stop
+        left = None if limit is None else limit - (time.perf_counter() - t0)
+        result = _complete(
+            targets, scenes, early.chosen, attempt, halt, time.perf_counter(), left, None, early.steps, interrupted
+        )
+        if best is None or result_key(result) < result_key(best):
+            best, chosen = result, k
     seconds = time.perf_counter() - t0
     fit = dict(
         best.posed.fit,
@@ -456,11 +470,12 @@ def _skip_attempt(targets, scenes, config, extra_starts, anchor, tried: dict[int
 
 class GaveUp(Exception):
     """An attempt's searches all stopped out of reach (search.config.GiveUp), after ``steps``
-    steps: there is no result to finish."""
+    steps in all. ``chosen`` is the best of them, unfinished: the fit finishes it only when no
+    later attempt gives a result (a Ctrl-C, ``stop`` or the time limit comes first)."""
 
-    def __init__(self, steps: int):
+    def __init__(self, chosen: HandCountFit, steps: int):
         super().__init__(f"out of reach after {steps} steps")
-        self.steps = steps
+        self.chosen, self.steps = chosen, steps
 
 
 def _attempt(
@@ -483,13 +498,21 @@ def _attempt(
         )
         if searches[-1].search.interrupted:
             break
-    reached = [s for s in searches if not s.search.gave_up]
-    if not reached:
-        raise GaveUp(sum(s.search.steps for s in searches))
-    chosen = min(reached, key=HandCountFit.preference_key)
-    poses, finish_interrupted = _finish(chosen, config, stop, t0, limit, progress)
     steps = sum(s.search.steps for s in searches)
-    interrupted = finish_interrupted or any(s.search.interrupted for s in searches)
+    interrupted = any(s.search.interrupted for s in searches)
+    # A search that gave up is still a candidate when another was interrupted: the fit ends here.
+    reached = searches if interrupted else [s for s in searches if not s.search.gave_up]
+    if not reached:
+        raise GaveUp(min(searches, key=HandCountFit.preference_key), steps)
+    chosen = min(reached, key=HandCountFit.preference_key)
+    return _complete(targets, scenes, chosen, config, stop, t0, limit, progress, steps, interrupted)
+
+
+def _complete(targets, scenes, chosen, config, stop, t0, limit, progress, steps, interrupted) -> FitResult:
+    """A search's best finished (separation, polish, hops, placement) and measured: the
+    attempt's FitResult. ``t0`` and ``limit`` as the attempt's; ``steps`` its search steps."""
+    poses, finish_interrupted = _finish(chosen, config, stop, t0, limit, progress)
+    interrupted = interrupted or finish_interrupted
     try:
         return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, interrupted)
     except KeyboardInterrupt:  # Ctrl-C while the finished pose is measured: measure it, then stop
