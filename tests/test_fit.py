@@ -217,6 +217,26 @@ def test_frame_recorder_counts_over_both_searches_of_hands_auto_and_every_attemp
     assert min(per_search) >= 5  # both searches of an attempt are in the GIF's snapshots
 
 
+def test_frame_recorder_counts_each_attempt_from_zero_after_one_that_gave_up_early():
+    from types import SimpleNamespace
+
+    from handshadow.pipeline import FrameRecorder
+
+    recorder = FrameRecorder(total_steps=200, searches=2, limit=10)
+    within = []
+    for attempt, last in ((0, 40), (1, 100)):  # the first attempt's searches both gave up after 40 of 100 steps
+        for n_hands in (1, 2):
+            for done in range(1, last + 1):
+                recorder(
+                    SimpleNamespace(
+                        done=done, total=100, poses=SimpleNamespace(n_hands=n_hands), attempt=attempt, hop=0
+                    )
+                )
+                within.append(recorder.in_attempt)
+    assert within == list(range(1, 81)) + list(range(1, 201))
+    assert recorder.done == 280 and recorder.finished
+
+
 @pytest.mark.parametrize(
     ("field", "value", "words"),
     [("attempts", 0, "attempt"), ("hops", -1, "hops"), ("skip_attempts", 1, "skip_attempts")],

@@ -73,8 +73,9 @@ class FrameRecorder:
     over ``total_steps``, counted over all of an attempt's searches (``--hands auto`` runs
     one per hand count, each counting its steps from 0). ``done`` is that count over every
     attempt so far, ``attempt`` the current attempt (fit.fit_frame starts afresh while a
-    result fails the success test) and ``finished`` says whether its last search has taken
-    its last step. The hops' stages (Progress.hop) are not counted or kept: they come after
+    result fails the success test), ``in_attempt`` the count within it (an attempt that gives
+    up early, fit.GIVE_UP, ends short of its total) and ``finished`` says whether its last
+    search has taken its last step. The hops' stages (Progress.hop) are not counted or kept: they come after
     the searches, and their result is the GIF's last frame."""
 
     def __init__(self, total_steps: int, searches: int = 1, limit: int = 36):
@@ -82,23 +83,29 @@ class FrameRecorder:
         self.searches = searches
         self.frames: list[Progress] = []
         self.done = 0
+        self.in_attempt = 0
         self.attempt = 0
         self.finished = False
         self._next = 0
         self._offset = 0
         self._last = 0
         self._search = 0
+        self._attempt_start = 0
 
     def __call__(self, p: Progress) -> None:
         if p.hop:
             return
-        if p.attempt != self.attempt:  # a fresh attempt: its searches count from the first
+        fresh = p.attempt != self.attempt
+        if fresh:  # a fresh attempt: its searches count from the first
             self.attempt, self._search = p.attempt, -1
         if p.done < self._last or self._search < 0:  # the next search began
             self._offset += self._last
             self._search += 1
+        if fresh:
+            self._attempt_start = self._offset
         self._last = p.done
         self.done = self._offset + p.done
+        self.in_attempt = self.done - self._attempt_start
         self.finished = p.done >= p.total and self._search + 1 >= self.searches
         if self.done >= self._next or p.done == p.total:
             self.frames.append(p)
@@ -171,7 +178,7 @@ def fit_to_folder(
             progress_hook(p)
         if bar is not None:
             bar.total = total * (p.attempt + 1)  # a fresh attempt runs the searches again
-            bar.n = min(bar.total, recorder.done)
+            bar.n = min(bar.total, total * p.attempt + recorder.in_attempt)
             bar.set_postfix(iou=f"{p.iou:.3f}")
             # After the last search's last step come the separation, the polish and the export.
             again = f" (attempt {p.attempt + 1})" if p.attempt else ""
