@@ -853,3 +853,28 @@ def test_a_ctrl_c_or_stop_after_an_attempt_gave_up_finishes_that_attempt(how, mo
     assert result.interrupted and result.posed.fit["interrupted"] is True
     assert result.posed.fit["attempt"] == 1 and result.posed.fit["attempts_run"] == 1
     assert result.steps == searches[0].steps and result.penetration.performable()
+
+
+def test_the_time_limit_after_an_attempt_gave_up_finishes_that_attempt(monkeypatch):
+    import time
+
+    from handshadow import fit as fit_module
+
+    monkeypatch.setitem(fit_module.POLISH_ROUNDS, "default", (2, 0, 1))
+    config = FitConfig(hands="1", size=64, quality="default", iters=12, attempts=3, time_limit_s=3600)
+    searches, late = [], [0.0]
+    real_run, real_clock = fit_module.run_stages, time.perf_counter
+
+    def run(*a, **k):  # once the first attempt gives up, the clock is past the limit
+        searches.append(real_run(*a, **k))
+        if searches[-1].gave_up:
+            late[0] = 7200.0
+        return searches[-1]
+
+    monkeypatch.setattr(fit_module, "run_stages", run)
+    monkeypatch.setattr(time, "perf_counter", lambda: real_clock() + late[0])
+    result = fit_frame(_nine_squares(), config)
+    # No second attempt starts; the first is finished (separated; the polish stops at the limit).
+    assert len(searches) == 1 and searches[0].gave_up
+    assert result.posed.fit["attempt"] == 1 and result.posed.fit["attempts_run"] == 1
+    assert not result.interrupted and result.steps == searches[0].steps and result.penetration.performable()
