@@ -40,7 +40,7 @@ def test_an_entrys_own_shadow_retrieves_it():
 
 def test_an_atlas_of_hands_without_forearms_builds(monkeypatch):
     """A hand without a forearm has no forearm axis: its entries turn the way the arm would go
-    (from the middle finger's base back through the wrist) and are seen from any direction."""
+    (from the middle finger's base back through the wrist) and are seen from any direction that leads back."""
     from handshadow.hands import load_hand
     from handshadow.hands.limits import JointLimits
     from handshadow.search import atlas as atlas_module
@@ -57,3 +57,17 @@ def test_an_atlas_of_hands_without_forearms_builds(monkeypatch):
     arm = atlas_module.arm_axis(out)
     toward_lamp = (arm / arm.norm(dim=1, keepdim=True))[:, 2]
     assert float((toward_lamp > 0.98).float().mean()) < 0.25  # not mostly along the beam, as a forearm's are
+
+
+def test_every_entrys_forearm_leads_back_from_the_wall():
+    """No entry points its forearm at the wall (a pose no performer holds, hands.arms): the
+    views with the forearm in sight turn it any way that leads back."""
+    from handshadow.hands import load_hand
+    from handshadow.hands.arms import BACK_SLACK_M
+
+    atlas = load_atlas()
+    model = load_hand("anny", "right", forearm=True)
+    with torch.no_grad():
+        out = model(*atlas.poses.args())
+    elbow_minus_wrist = out.forearm_points[:, -1, 2] - atlas.poses.translation[:, 2]  # +z: toward the lamp
+    assert float(elbow_minus_wrist.min()) >= -BACK_SLACK_M

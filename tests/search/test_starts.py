@@ -72,3 +72,26 @@ def test_a_later_attempt_starts_from_the_library_and_atlas_starts_not_yet_search
     second = choose_starts(problem, sides, 16, 12, np.random.default_rng(1), atlas=atlas, skip=frozenset(tried))
     assert second.batch == 12 and not tried & {start_key(o) for o in second.origins}
     assert all(problem.holdable(second))  # still holdable ones first
+
+
+def test_two_hand_atlas_starts_can_be_held_by_one_person_and_some_are_kept():
+    """Each atlas pair's other hand keeps the first's size, so both stand about as far from
+    the wall and one person reaches both (scaled alone onto what the first leaves uncovered,
+    it stood a metre or more nearer the wall and no atlas pair could be held); every entry's
+    forearm leads back. So atlas pairs compete with the random hands for the kept starts."""
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.search.atlas import load_atlas
+    from handshadow.search.starts import ALIGN_FRAME_PX, ATLAS_FIRST, ATLAS_SECOND, atlas_starts, choose_starts
+
+    target, truth = known_target("bird", 64)
+    sides = ["right", "left"]
+    problem = make_problem(target, truth.scene, sides, FitConfig(size=64))
+    atlas = load_atlas("anny", True, "anatomical")
+    pairs = atlas_starts(atlas, problem.level(ALIGN_FRAME_PX).maps.target.cpu(), sides, problem.scene)
+    assert pairs.batch == ATLAS_FIRST * ATLAS_SECOND
+    assert all(problem.holdable(pairs))
+    n = torch.as_tensor(problem.scene.wall.normal, dtype=torch.float32)
+    depths = [(h.translation - torch.as_tensor(problem.scene.wall.point, dtype=torch.float32)) @ n for h in pairs.hands]
+    assert float((depths[0] - depths[1]).abs().max()) < 0.5  # metres: a person's two hands
+    chosen = choose_starts(problem, sides, 16, 12, np.random.default_rng(0), atlas=atlas)
+    assert any(o.kind == "atlas" for o in chosen.origins)

@@ -6,7 +6,8 @@ Entries. Finger configurations mix straight, half-bent and curled fingers (curle
 than a fist whose fingertips stay out of the palm), spread, thumb postures, and rings where the
 thumb's tip meets the index or middle fingertip (holes in the shadow). Each is seen from many
 directions: mostly with the forearm leading back toward the lamp, where it hides behind the
-hand and the wrist bends the hand across the beam, and some with the forearm in view.
+hand and the wrist bends the hand across the beam, and some with the forearm in view (leading
+back from the wall all the same, as a performer's forearm does).
 
 Descriptor. Around its centroid the shadow is sampled on a polar grid whose radius follows the
 shadow's size; the magnitudes of the first harmonics over the angle make it blind to turning,
@@ -34,7 +35,7 @@ from handshadow.poses import HandPoseBatch
 from handshadow.scene import Scene
 
 log = logging.getLogger(__name__)
-VERSION = 1
+VERSION = 2  # 2: every forearm leads back from the wall
 FRAME_PX = 64  # atlas shadows are this many pixels high (the alignment's resolution)
 CONFIGS = 160  # random finger configurations
 RINGS = 16  # configurations whose thumb tip meets the index or middle fingertip
@@ -148,12 +149,14 @@ def wrist_angles(n: int, limits: JointLimits, rng: np.random.Generator) -> np.nd
 def arm_directions(n: int, rng: np.random.Generator, hidden_share: float = HIDDEN_SHARE) -> np.ndarray:
     """(n, 3) unit directions for the forearm (wrist to elbow), world frame, in VIEWS-long
     runs: the first ``hidden_share`` of each run within HIDDEN_CONE_DEG of the ray toward the
-    lamp (+z), the rest any way at all."""
+    lamp (+z), the rest any way that leads back from the wall (z >= 0): a forearm toward the
+    wall is one no performer can hold (hands.arms), so no start should have it."""
     tilt = np.radians(HIDDEN_CONE_DEG) * np.sqrt(rng.uniform(size=n))
     azimuth = rng.uniform(0, 2 * np.pi, n)
     toward_lamp = np.stack([np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), np.cos(tilt)], 1)
     free = rng.normal(size=(n, 3))
     free /= np.linalg.norm(free, axis=1, keepdims=True)
+    free[:, 2] = np.abs(free[:, 2])
     hidden = (np.arange(n) % VIEWS) < round(VIEWS * hidden_share)
     return np.where(hidden[:, None], toward_lamp, free)
 

@@ -36,7 +36,7 @@ ALIGN_SCALES = np.array([0.8, 1.0, 1.25])  # times the area ratio (a point light
 PER_LIBRARY_POSE = 2  # at most this many starts from any one library pose
 ATLAS_ONE = 48  # one hand: atlas entries nearest the target
 ATLAS_FIRST = 12  # two hands: entries nearest the target, as the first hand
-ATLAS_SECOND = 3  # ... and for each, entries nearest what it leaves uncovered, as the other
+ATLAS_SECOND = 6  # ... and for each, entries nearest what it leaves uncovered, as the other
 HOLE_PENALTY = 0.3  # how much a start that fills the target's holes and notches loses (see start_score)
 ATLAS_SHARE = 0.5  # at most this share of the kept starts from the atlas (the rest stay diverse)
 SECOND_HAND_MIN_SHARE = 0.05  # less left uncovered than this share of the target: cover it all
@@ -136,14 +136,20 @@ def _frame(fingers, back) -> np.ndarray:
 
 
 def similarity_align(
-    shadows: torch.Tensor, target: torch.Tensor, pivot: tuple[float, float], angles_deg: np.ndarray, scales: np.ndarray
+    shadows: torch.Tensor,
+    target: torch.Tensor,
+    pivot: tuple[float, float],
+    angles_deg: np.ndarray,
+    scales: np.ndarray,
+    base: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Best 2D similarity per shadow, about a pivot.
 
     Args:
         shadows: (B, H, W) candidate shadows; target: (H, W).
         pivot: (x, y) pixel coordinates the rotation and scale turn about (the lamp's foot).
-        angles_deg: rotations to try; scales: scale factors to try (times the area ratio).
+        angles_deg: rotations to try; scales: scale factors to try, times ``base`` (B,) (None:
+            the square root of the area ratio, target over shadow).
     Returns:
         angle (B,) radians, scale (B,), shift (B, 2) pixels (x, y), and the IoU (B,) reached.
     A shadow point q (pixels from the pivot) goes to scale * R(angle) q + shift.
@@ -158,7 +164,7 @@ def similarity_align(
     t_area = target.sum().clamp(min=1)
     c_s = torch.stack([(shadows * xx).sum((1, 2)) / area, (shadows * yy).sum((1, 2)) / area], 1)
     c_t = torch.stack([(target * xx).sum() / t_area, (target * yy).sum() / t_area])
-    base = torch.sqrt(t_area / area)
+    base = torch.sqrt(t_area / area) if base is None else base.to(shadows.dtype)
     best = (torch.full((b,), -1.0), torch.zeros(b), torch.ones(b), torch.zeros(b, 2))
     for a in np.radians(angles_deg):
         rot = torch.tensor([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]], dtype=shadows.dtype)
@@ -371,7 +377,10 @@ def atlas_starts(atlas: Atlas, target: torch.Tensor, sides: list[str], scene) ->
     """Starts from the atlas for a target (H, W) at ALIGN_FRAME_PX: with one hand, the
     ATLAS_ONE entries nearest the target's shape; with two, for each of the ATLAS_FIRST
     nearest (as the first hand, aligned to the target) the ATLAS_SECOND nearest what it leaves
-    uncovered (as the other hand, aligned to that, PAIR_DEPTH_OFFSET_M nearer the wall).
+    uncovered (as the other hand, turned and moved onto that, PAIR_DEPTH_OFFSET_M nearer the
+    wall). The other hand keeps the first's scale within ALIGN_SCALES: both stand about as far
+    from the wall, as one person's two hands do (scaled alone onto a small remainder, it would
+    stand a metre or more nearer the wall, its elbow out of that person's reach).
     Origins are ('atlas', entry numbers)."""
     if tuple(target.shape) != atlas.masks.shape[1:]:
         return _no_starts(sides)  # a frame of another shape than the atlas's
@@ -393,7 +402,8 @@ def atlas_starts(atlas: Atlas, target: torch.Tensor, sides: list[str], scene) ->
             rest = target  # the first hand covers it: the other hand goes over the whole shape
         second_idx = atlas.nearest(shape_descriptor(rest[None])[0].numpy(), ATLAS_SECOND)
         second_masks = _atlas_masks(atlas, second_idx, sides[1])
-        a2, s2, t2, _ = similarity_align(second_masks, rest, pivot, ALIGN_ANGLES_DEG, ALIGN_SCALES)
+        same_size = scale[k].expand(len(second_idx))  # atlas entries share one depth, so one size
+        a2, s2, t2, _ = similarity_align(second_masks, rest, pivot, ALIGN_ANGLES_DEG, ALIGN_SCALES, base=same_size)
         second = apply_similarity(
             PoseBatch([_atlas_hands(atlas, second_idx, sides[1], depth)]), a2, s2, t2, scene, target.shape[0]
         )
