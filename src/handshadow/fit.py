@@ -248,18 +248,20 @@ def schedule(
     hypotheses, a broad search, go without the slow exact test. After every stage but
     the last, hands inside each other pass one in front of the other (Stage.layer). The
     exact-outline stages weigh spills, notches and thin parts more (OUTLINE_THIN and the
-    polish's weights)."""
+    polish's weights). Fast is the default's shape at about half its starts and steps (README,
+    **Atlas pairs one person can hold**)."""
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")
     s = Stage
     n_random, n_keep, stages = {
         "fast": (
-            24,
-            8,
+            64,
+            16,
             [
-                s(height=64, blur_px=6, attract_px=12, steps=60, keep=3, lr_scale=1.0, skeleton=1.0),
-                s(height=128, blur_px=2, attract_px=6, steps=50, keep=1, lr_scale=0.7, skeleton=0.3),
-                s(height=size, blur_px=0, attract_px=3, steps=40, keep=1, lr_scale=0.4, skeleton=0.05),
+                s(height=64, blur_px=8, attract_px=16, steps=100, keep=6, lr_scale=1.0, skeleton=1.0),
+                s(height=128, blur_px=3, attract_px=8, steps=70, keep=3, lr_scale=0.7, skeleton=0.3),
+                s(height=size, blur_px=1, attract_px=4, steps=80, keep=2, lr_scale=0.4, skeleton=0.05),
+                s(height=size, blur_px=0, attract_px=2, steps=50, keep=1, lr_scale=0.15, skeleton=0.0),
             ],
         ),
         "default": (
