@@ -40,11 +40,12 @@ from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, LAMP_TO_WALL_RA
 
 MAX_UPLOAD = "8mb"
 # The page fits as the command line does unless asked otherwise: on the 95 HSP shapes (2-core
-# CPU, README) fast passed the success test on 4 % in a median 12 s, default on 46 % in 1 to 3 min.
+# CPU, README, 2026-12-05) fast passed the success test on 33 % in a median 12 s, default on 86 %
+# in a median 25 s (a shape it fails takes up to 5 min).
 DEFAULT_QUALITY = "default"  # FitConfig.quality (a test holds them equal)
 QUALITY_HELP = (
-    "default: 1 to 3 minutes, as the command line; fast: about 15 s, a rough first look that seldom"
-    " matches the shape; best: several minutes (a 2-core CPU)"
+    "default: about half a minute, up to 5 minutes for a shape it cannot reach, as the command line;"
+    " fast: about 12 s, a rough first look that matches a third of shapes; best: longer (a 2-core CPU)"
 )
 INSTALL_HINT = "the app needs Gradio, an optional extra: pip install 'handshadow[app]'"
 # Set before Gradio (and the Hugging Face hub it imports) reads them: no analytics, no telemetry, offline.
