@@ -12,11 +12,13 @@ from handshadow.fit import CONTACTS_EVERY, OUTLINE_THIN, FitConfig, fit_frame, m
 from handshadow.hands.limits import JointLimits
 from handshadow.metrics import rank_key, score
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
+from handshadow.scene import LAMP_TO_WALL_M
 from handshadow.search import (
     Finishing,
     GiveUp,
     Hops,
     Interrupted,
+    Settle,
     Stage,
     Weights,
     finishing,
@@ -24,6 +26,7 @@ from handshadow.search import (
     objective,
     polish,
     separate,
+    settle,
 )
 from handshadow.search import stages as stages_module
 from handshadow.search.hops import focused_joints
@@ -174,6 +177,36 @@ def test_polish_improves_a_failing_pose_and_keeps_a_passing_one():
     polished = polish(problem, off, rounds=1, settings=settings)
     assert _key(problem, polished) < before  # strictly better by the ranking
     assert float(problem.penetration_mm(polished).max()) <= max(1.0, float(problem.penetration_mm(off).max()))
+
+
+def test_settle_brings_a_slightly_moved_pose_back_into_its_shadow():
+    problem, truth = _problem_and_truth()
+    off = _moved(truth, 0.006, 1.05)  # 6 mm sideways, the fingers a little more bent
+    before = score(problem.shadows(off)[0].numpy() > 0.5, problem.target)
+    settled = settle(problem, off, Settle(steps=60))
+    after = score(problem.shadows(settled)[0].numpy() > 0.5, problem.target)
+    assert rank_key(after) < rank_key(before)
+    assert before.iou < 0.95 and after.iou > 0.98, (before, after)
+    assert problem.mesh_penetration(settled)[0].deepest_mm <= Settle().tolerance_mm
+    assert settle(problem, truth, Settle(steps=10)) is truth  # nothing beats the truth: it comes back as it is
+
+
+def test_ctrl_c_in_the_settling_hands_back_the_best_so_far(monkeypatch):
+    problem, truth = _problem_and_truth()
+    off = _moved(truth, 0.006, 1.05)
+    calls = {"n": 0}
+    real = finishing.view_objective
+
+    def interrupted_on_the_twelfth_step(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 12:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(finishing, "view_objective", interrupted_on_the_twelfth_step)
+    with pytest.raises(Interrupted) as stop:
+        settle(problem, off, Settle(steps=40))
+    assert _key(problem, stop.value.poses) <= _key(problem, off)
 
 
 def test_ctrl_c_in_the_polish_hands_back_poses(monkeypatch):
@@ -663,6 +696,24 @@ def test_a_fit_hops_through_its_last_two_stages_as_its_quality_says(monkeypatch)
     assert calls == [(3, stages[-2:])]
     assert (seen[-1].hop, seen[-1].hops, seen[-1].attempt) == (1, 3, 0)  # the fit's progress sees the hops
     assert fit_module.HOPS["default"] >= 1
+
+
+def test_a_fit_settles_a_result_that_passes_with_the_default_quality_only(monkeypatch):
+    from handshadow import fit as fit_module
+
+    problem, truth = _problem_and_truth()
+    calls = []
+
+    def recording_settle(problem, poses, settings, stop=None):
+        calls.append((bool(problem.scores(poses)[0].success), settings))
+        return poses
+
+    monkeypatch.setattr(fit_module, "settle", recording_settle)
+    base = FitConfig(size=SIZE, quality="fast", iters=4, attempts=1, hops=0, lamp_to_wall_m=LAMP_TO_WALL_M)
+    assert fit_frame(problem.target, base, extra_starts=truth).success  # from the truth: a pass
+    assert calls == []  # fast does not settle
+    fit_frame(problem.target, dataclasses.replace(base, quality="default"), extra_starts=truth)
+    assert calls == [(True, fit_module.SETTLE["default"])]
 
 
 def _bent(poses, finger, by=0.8):

@@ -38,6 +38,7 @@ from handshadow.search import (
     Progress,
     Reach,
     SearchResult,
+    Settle,
     Stage,
     ViewTarget,
     hop,
@@ -45,6 +46,7 @@ from handshadow.search import (
     polish,
     run_stages,
     separate,
+    settle,
 )
 from handshadow.search.atlas import load_atlas
 from handshadow.search.starts import choose_starts, start_key
@@ -98,6 +100,12 @@ HOPS = {"fast": 0, "default": 3, "best": 4}
 # out of reach (search.config.GiveUp), and the next starts afresh: the stages, finishing steps
 # and hops after it cost 15 s or more and would not pass. Fast makes one attempt.
 GIVE_UP = {"fast": None, "default": GiveUp(), "best": GiveUp()}
+# Last of an attempt's finishing steps, after the hops: a result that passes settles into its
+# shadow at a steady rate, the outline's weights and then the area's (search.finishing.settle;
+# None: off). The search's last stage anneals to zero within 100 steps and leaves shadows a few
+# pixels off all along their outline. On 48 HSP first attempts it raised the median IoU from
+# 0.893 to 0.900 in a median 9 s and turned no failure into a pass (README, **Settling**).
+SETTLE = {"fast": None, "default": Settle(), "best": Settle()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -547,7 +555,7 @@ def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
 def _finish(
     chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: float | None, progress=None
 ) -> tuple[PoseBatch, bool]:
-    """Separation, polish, hops and placement of the chosen search's best: (poses,
+    """Separation, polish, hops, settling and placement of the chosen search's best: (poses,
     interrupted). ``progress`` sees the hops' stages."""
     problem, res = chosen.problem, chosen.search
     timed_out = False
@@ -590,6 +598,9 @@ def _finish(
                     stop=polish_stop,
                     progress=progress,
                 )
+            settling = SETTLE[config.quality]
+            if settling is not None and problem.scores(poses)[0].success:
+                poses = settle(problem, poses, settling, stop=polish_stop)
     except Interrupted as halt:  # Ctrl-C, stop or the time limit in the finishing steps: keep what they reached
         poses, interrupted = halt.poses, not timed_out
         if timed_out:

@@ -8,9 +8,10 @@
     starts.py     library poses and random hands, aligned to the target in 2D
     stages.py     run_stages(): coarse to fine, ranked and pruned after each stage (and
                   stopped early when every hypothesis is out of reach)
-    finishing.py  separate(), polish(), keep_between_light_and_wall()
+    finishing.py  separate(), polish(), settle(), keep_between_light_and_wall()
     hops.py       hop(): a close miss's fine stages again from harder-jittered copies
-    config.py     the numbers: Stage, Weights, LearningRates, Reach, Finishing, Hops, GiveUp
+    config.py     the numbers: Stage, Weights, LearningRates, Reach, Finishing, Settle, Hops,
+                  GiveUp
 
 A hypothesis is one or two hands (poses.PoseBatch). Joint angles stay inside their limits by
 construction (poses.PoseParameters); rotations are a rotation vector applied in world axes on
@@ -18,8 +19,8 @@ top of the start's rotation; translations are metres. Ranking is by the fit meas
 (metrics.rank_key; with several views metrics.ViewScores: every view's together).
 """
 
-from handshadow.search.config import Finishing, GiveUp, Hops, LearningRates, Reach, Stage, Weights
-from handshadow.search.finishing import Interrupted, keep_between_light_and_wall, polish, separate
+from handshadow.search.config import Finishing, GiveUp, Hops, LearningRates, Reach, Settle, Stage, Weights
+from handshadow.search.finishing import Interrupted, keep_between_light_and_wall, polish, separate, settle
 from handshadow.search.hops import hop
 from handshadow.search.objective import LossTerms, objective, view_objective
 from handshadow.search.problem import Level, Problem, View, ViewTarget
@@ -37,6 +38,7 @@ __all__ = [
     "Progress",
     "Reach",
     "SearchResult",
+    "Settle",
     "Stage",
     "View",
     "ViewTarget",
@@ -47,5 +49,6 @@ __all__ = [
     "polish",
     "run_stages",
     "separate",
+    "settle",
     "view_objective",
 ]

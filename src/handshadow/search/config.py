@@ -169,6 +169,36 @@ class Finishing:
 
 
 @dataclasses.dataclass(frozen=True)
+class Settle:
+    """The settling after the polish (finishing.settle): for each of ``passes`` (weights by
+    name: "outline", the exact-outline stages' thin, spill and notches weights; "area", the
+    image term alone, L2 against the target), ``steps`` steps at a steady ``lr_scale``, the
+    pose scored every ``check_every`` steps; a pose wins only if it goes no deeper into other
+    flesh than the start or ``tolerance_mm``. Every pass keeps the physical rules (proxies
+    apart, placement, reach, arms)."""
+
+    passes: tuple[str, ...] = ("outline", "area")
+    steps: int = 300
+    lr_scale: float = 0.3
+    check_every: int = 5
+    tolerance_mm: float = TOLERANCE_MM
+    outline_thin: float = 8.0
+    outline_spill: float = Finishing.polish_spill
+    outline_notches: float = Finishing.polish_notches
+
+    def weights(self, name: str, w: Weights) -> Weights:
+        if name == "outline":
+            return dataclasses.replace(
+                w, thin=self.outline_thin, spill=self.outline_spill, notches=self.outline_notches
+            )
+        if name == "area":
+            return dataclasses.replace(
+                w, thin=0.0, depth=0.0, excess=0.0, attraction=0.0, inside=0.0, thin_pull=0.0, gaps=0.0, far=0.0
+            )
+        raise ValueError(f"unknown settling pass {name!r}")
+
+
+@dataclasses.dataclass(frozen=True)
 class Hops:
     """A hop from a close miss (search.hops): ``copies`` copies of it, all but the first
     jittered by ``jitter`` sigmas (joint logits, rotation vector in radians, translation in
