@@ -231,7 +231,7 @@ def _add_fit_options(
         default=quality_default,
         choices=["fast", "default", "best"],
         help=f"search effort (default: {quality_default}); on a 2-core CPU a two-hand fit takes about 12 s fast"
-        " (one short attempt: a rough look, a third of the HSP shapes pass), default about 25 s when its first"
+        " (one short attempt: a rough look, a third of the HSP shapes pass), default about 30 s when its first"
         " attempt passes and up to 5 min when every attempt fails, best longer",
     )
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
