@@ -49,6 +49,7 @@ from handshadow.search import (
     settle,
 )
 from handshadow.search.atlas import load_atlas
+from handshadow.search.config import OUTLINE_THIN
 from handshadow.search.starts import choose_starts, start_key
 
 log = logging.getLogger(__name__)
@@ -69,7 +70,6 @@ CONTACTS_EVERY = 10
 # spill weight alone pulled thin parts in as it pulled spills back (README, **Outline stages**).
 OUTLINE_STAGE_BLUR_PX = 1.0
 OUTLINE_STAGE_SKELETON = 0.05
-OUTLINE_THIN = 8.0
 CUDA_WIDER = 16  # on a GPU the search keeps this many times the hypotheses (see schedule)
 MAX_VIEWS = 2  # targets one pose may answer: today's lamp and wall, and one turned about the hands
 # With several views each shadow's outline is pulled by the other views too and settles more

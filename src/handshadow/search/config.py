@@ -53,6 +53,10 @@ class Stage:
         return dataclasses.replace(w, **changes) if changes else w
 
 
+# The exact-outline stages (fit.schedule) and the settling weigh thin parts this much (twice
+# Weights.thin; README, **Outline stages**).
+OUTLINE_THIN = 8.0
+
 # The image term's extra weight on the error regions past the HD95 bar (objective.FarOutline)
 # is found afresh every this many steps at full resolution (stages, polish).
 FAR_EVERY = 10
@@ -182,7 +186,7 @@ class Settle:
     lr_scale: float = 0.3
     check_every: int = 5
     tolerance_mm: float = TOLERANCE_MM
-    outline_thin: float = 8.0
+    outline_thin: float = OUTLINE_THIN
     outline_spill: float = Finishing.polish_spill
     outline_notches: float = Finishing.polish_notches
 

@@ -229,12 +229,8 @@ def polish_round(
             return False
         current = params.poses()
         for i, s in enumerate(problem.judge([sh.mask.detach().cpu().numpy() > 0.5 for sh in shadows])):
-            key = s.key()
-            # The exact mesh test only for a pose that would win: it is the costly part.
-            if key >= best["key"] or (keep_holdable and not problem.holdable(current.item(i))[0]):
-                continue
-            if problem.mesh_penetration(current.item(i))[0].deepest_mm <= allowed_mm:
-                best.update(score=s, key=key, poses=current.item(i))
+            if wins(problem, current.item(i), s, best["key"], keep_holdable, allowed_mm):
+                best.update(score=s, key=s.key(), poses=current.item(i))
         return False
 
     try:
@@ -279,12 +275,8 @@ def settle(
                 if step % settings.check_every and step != settings.steps:
                     return False
                 s = problem.judge([sh.mask.detach().cpu().numpy() > 0.5 for sh in shadows])[0]
-                if s.key() >= found["key"]:
-                    return False
                 current = params.poses()
-                if keep_holdable and not problem.holdable(current)[0]:
-                    return False
-                if problem.mesh_penetration(current)[0].deepest_mm <= allowed:
+                if wins(problem, current, s, found["key"], keep_holdable, allowed):
                     found.update(score=s, key=s.key(), poses=current)
                 return False
 
@@ -303,6 +295,19 @@ def settle(
     except KeyboardInterrupt:
         raise Interrupted(best) from None
     return best
+
+
+def wins(
+    problem: Problem, pose: PoseBatch, score: ViewScores, best_key: tuple, keep_holdable: bool, allowed_mm: float
+) -> bool:
+    """Whether a batch-1 pose met in the polish or the settling replaces the best so far: it
+    ranks better (``score``, metrics.ViewScores.key, below ``best_key``), keeps arms that can
+    be held when the start's could (``keep_holdable``), and goes no deeper into other flesh
+    than ``allowed_mm``. The exact mesh test runs last, only for a pose that would win: it is
+    the costly part."""
+    if score.key() >= best_key or (keep_holdable and not problem.holdable(pose)[0]):
+        return False
+    return problem.mesh_penetration(pose)[0].deepest_mm <= allowed_mm
 
 
 def jitter(
