@@ -687,15 +687,15 @@ def test_a_fit_hops_through_its_last_two_stages_as_its_quality_says(monkeypatch)
         return poses
 
     monkeypatch.setattr(fit_module, "hop", recording_hop)
-    base = FitConfig(hands="1", size=64, quality="fast", iters=4, attempts=1)
+    base = FitConfig(hands="1", size=64, quality="fast", iters=4, attempts=1, hops=0)
     seen = []
     fit_frame(target, base, progress=seen.append)
-    assert calls == [] and not any(p.hop for p in seen)  # fast makes no hops
+    assert calls == [] and not any(p.hop for p in seen)  # --hops 0 makes none
     fit_frame(target, dataclasses.replace(base, hops=3), progress=seen.append)
     _, _, stages = schedule("fast", 4, 64)
     assert calls == [(3, stages[-2:])]
     assert (seen[-1].hop, seen[-1].hops, seen[-1].attempt) == (1, 3, 0)  # the fit's progress sees the hops
-    assert fit_module.HOPS["default"] >= 1
+    assert fit_module.HOPS["default"] >= 1 and fit_module.HOPS["fast"] >= 1
 
 
 def test_a_fit_settles_a_result_that_passes_with_the_default_quality_only(monkeypatch):

@@ -230,8 +230,9 @@ def _add_fit_options(
         "--quality",
         default=quality_default,
         choices=["fast", "default", "best"],
-        help=f"search effort (default: {quality_default}); on a 2-core CPU a two-hand fit takes about 12 s fast"
-        " (one short attempt: a rough look, a third of the HSP shapes pass), default about 30 s when its first"
+        help=f"search effort (default: {quality_default}); on a 2-core CPU a two-hand fit takes about 13 s fast"
+        " (one short attempt: a rough look, nearly half the HSP shapes pass; up to a minute and a half when it"
+        " hops from a near miss), default about 30 s when its first"
         " attempt passes and up to 5 min when every attempt fails, best longer",
     )
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
@@ -248,7 +249,7 @@ def _add_fit_options(
         type=int,
         help="from a result within reach of the success test (IoU met, thin parts within 0.05 and HD95 "
         "within 0.03 of their bars), each attempt's fine stages again from jittered copies, the better kept; about 40 s "
-        "each at 256 px, the last weighing where the outline fails the HD95 bar (default: 0 fast, 3 default, 4 best)",
+        "each at 256 px, the last weighing where the outline fails the HD95 bar (default: 3 fast, 3 default, 4 best)",
     )
     p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")
