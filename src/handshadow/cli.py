@@ -230,8 +230,8 @@ def _add_fit_options(
         "--quality",
         default=quality_default,
         choices=["fast", "default", "best"],
-        help=f"search effort (default: {quality_default}); on a 2-core CPU a two-hand fit takes about 13 s fast"
-        " (one short attempt: a rough look, nearly half the HSP shapes pass; up to a minute and a half when it"
+        help=f"search effort (default: {quality_default}); on a 2-core CPU a two-hand fit takes about 14 s fast"
+        " (one short attempt: a rough look, half the HSP shapes pass; up to a minute and a half when it"
         " hops from a near miss), default about 30 s when its first"
         " attempt passes and up to 5 min when every attempt fails, best longer",
     )
