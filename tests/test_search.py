@@ -372,7 +372,10 @@ def test_a_failed_fit_starts_afresh_with_fresh_starts_and_keeps_the_better(monke
     from handshadow.search.starts import start_key
 
     target, _ = known_target("dog", 64)
-    base = FitConfig(hands="1", size=64, quality="fast", iters=2, exclude_library=("dog",))  # far from passing
+    # No polish and no hops: a first attempt of a few steps a stage fails (the polish alone, 60
+    # steps at 64 px, passes the dog from the wider fast's starts).
+    monkeypatch.setitem(fit_module.POLISH_ROUNDS, "fast", (0, 0, 1))
+    base = FitConfig(hands="1", size=64, quality="fast", iters=2, exclude_library=("dog",), hops=0)  # far from passing
     single = fit_frame(target, dataclasses.replace(base, attempts=1))
     assert not single.success
     attempts, starts = [], []
@@ -408,7 +411,8 @@ def test_a_stop_in_a_later_attempt_keeps_the_best_so_far(monkeypatch):
     from handshadow import fit as fit_module
 
     target, _ = known_target("dog", 64)
-    base = FitConfig(hands="1", size=64, quality="fast", iters=4, exclude_library=("dog",), attempts=3)
+    monkeypatch.setitem(fit_module.POLISH_ROUNDS, "fast", (0, 0, 1))  # so the first attempt fails (as above)
+    base = FitConfig(hands="1", size=64, quality="fast", iters=4, exclude_library=("dog",), attempts=3, hops=0)
     attempts, seen = [], []
     real_attempt = fit_module._attempt
     monkeypatch.setattr(fit_module, "_attempt", lambda *a, **k: attempts.append(real_attempt(*a, **k)) or attempts[-1])
@@ -426,7 +430,8 @@ def test_ctrl_c_while_a_later_attempt_sets_up_keeps_the_first(monkeypatch):
     from handshadow import fit as fit_module
 
     target, _ = known_target("dog", 64)
-    base = FitConfig(hands="1", size=64, quality="fast", iters=2, exclude_library=("dog",), attempts=3)
+    monkeypatch.setitem(fit_module.POLISH_ROUNDS, "fast", (0, 0, 1))  # so the first attempt fails (as above)
+    base = FitConfig(hands="1", size=64, quality="fast", iters=2, exclude_library=("dog",), attempts=3, hops=0)
     first = fit_frame(target, dataclasses.replace(base, attempts=1))
     assert not first.success  # so a second attempt starts
     real_choose, calls = fit_module.choose_starts, []
