@@ -231,7 +231,7 @@ def _add_fit_options(
         default=quality_default,
         choices=["fast", "default", "best"],
         help=f"search effort (default: {quality_default}); on a 2-core CPU a two-hand fit takes about 14 s fast"
-        " (one short attempt: a rough look, half the HSP shapes pass; up to a minute and a half when it"
+        " (one short attempt: a rough look, half the HSP shapes pass; up to about a minute when it"
         " hops from a near miss), default about 30 s when its first"
         " attempt passes and up to 5 min when every attempt fails, best longer",
     )

@@ -261,7 +261,7 @@ def schedule(
     hypotheses, a broad search, go without the slow exact test. After every stage but
     the last, hands inside each other pass one in front of the other (Stage.layer). The
     exact-outline stages weigh spills, notches and thin parts more (OUTLINE_THIN and the
-    polish's weights). Fast is the default's shape at about five-eighths of its starts and
+    polish's weights). Fast is the default's shape at about two-thirds of its starts and
     steps, and keeps fewer hypotheses (README, **Atlas pairs one person can hold**, **Fast
     hops**)."""
     if quality not in QUALITY:
