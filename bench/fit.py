@@ -4,14 +4,16 @@ success). It runs on `handshadow batch` (Dask), so it scales out with --workers 
 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
                         [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
-                        [--fits-only] [--no-forearm] [--lamp-distance M] [--hops N] [--attempts N] [--skip-attempts N]
+                        [--fits-only] [--sheets-only] [--no-forearm] [--lamp-distance M] [--hops N] [--attempts N] [--skip-attempts N]
 
 Prints one row per target as it finishes: the shadow's measures, the deepest penetration
 between or within the hands (pen, mm, exact on the meshes), whether the pose can be held
 (perf), whether the shadow alone passes (shadow) and the success test (ok: shadow and
 performable), then the fit's other measures (whatever pose.json's "fit" holds) as key=value.
-It writes a contact sheet (target | shadow | overlay per row), the result folders (NAME/),
-summary.csv, index.html and a JSON of the rows to --out. The targets whose frame has a hole
+It writes a contact sheet (target | shadow | overlay per row, contact_sheet.png), one of
+successes beside failures (contact_pairs.png, up to PAIR_ROWS of each spread over their IoU,
+named and measured: the README's), the result folders (NAME/), summary.csv, index.html and a
+JSON of the rows to --out; --sheets-only writes the two sheets again from --out's rows. The targets whose frame has a hole
 of at least HOLE_SHARE of its area (found in each written target.png) are listed as a group.
 It ends with
 SUMMARY n=<n> median_iou=<x> success=<share> shadow_success=<share> performable_success=<share>
@@ -47,6 +49,8 @@ TABLE = {"iou": "IoU", "boundary_f1": "F1@2", "hd95": "HD95", "thin_recall": "th
 NOT_MEASURES = {"name", "hands", "success", "seconds", "worker", "error", "status", "attempts", "task_s", "source"}
 NOT_MEASURES |= {"iterations", "seed", "limits", "quality", "interrupted", "penetration_mm", "performable"}
 NOT_MEASURES |= {"shadow_success"}
+#: contact_pairs.png shows at most this many successes and as many failures.
+PAIR_ROWS = 8
 #: A target belongs to the holes group when a hole of its frame covers at least this share of it.
 HOLE_SHARE = 0.005
 
@@ -84,7 +88,16 @@ def main() -> None:
     parser.add_argument("--scheduler", help="an existing Dask cluster instead of a local one")
     parser.add_argument("--resume", action="store_true", help="keep complete result folders in --out (default: refit)")
     parser.add_argument("--fits-only", action="store_true", help="fit and judge in local processes, write no folders")
+    parser.add_argument(
+        "--sheets-only", action="store_true", help="write the contact sheets again from --out's rows.json, fit nothing"
+    )
     args = parser.parse_args()
+    if args.sheets_only:
+        rows_file = Path(args.out) / "rows.json"
+        if not rows_file.is_file():
+            parser.error(f"no rows.json in {args.out}: run the bench with --out {args.out} first")
+        write_sheets(Path(args.out), json.loads(rows_file.read_text()))
+        return
     targets = sorted(find_targets(args.folders), key=lambda t: t.source)
     if args.names:
         wanted = set(args.names.split(","))
@@ -140,13 +153,61 @@ def main() -> None:
     out = Path(args.out)
     rows = report.fitted
     (out / "rows.json").write_text(json.dumps(rows, indent=1))
-    if rows:
-        iio.imwrite(
-            out / "contact_sheet.png", np.concatenate([_sheet_row(out / r["name"], r["success"]) for r in rows], 0)
-        )
+    write_sheets(out, rows)
     holes = [r for r in rows if largest_hole_share(out / r["name"] / "target.png") >= HOLE_SHARE]
-    print(f"contact sheet: {out / 'contact_sheet.png'}; results: {out / 'index.html'}")
+    print(f"results: {out / 'index.html'}")
     _summary(rows, holes)
+
+
+def write_sheets(out: Path, rows: list[dict]) -> None:
+    """contact_sheet.png (every row) and contact_pairs.png (successes | failures) in ``out``."""
+    rows = [r for r in rows if r.get("status") != "failed" and (out / r["name"] / "overlay.png").is_file()]
+    if not rows:
+        return
+    iio.imwrite(out / "contact_sheet.png", np.concatenate([_sheet_row(out / r["name"], r["success"]) for r in rows], 0))
+    iio.imwrite(out / "contact_pairs.png", _pairs_sheet(out, rows))
+    print(f"contact sheets: {out / 'contact_sheet.png'}, {out / 'contact_pairs.png'}")
+
+
+def _spread(rows: list[dict], n: int) -> list[dict]:
+    """At most n of rows, spread evenly over them sorted by IoU (best first)."""
+    rows = sorted(rows, key=lambda r: -r["iou"])
+    if len(rows) <= n:
+        return rows
+    return [rows[round(i * (len(rows) - 1) / (n - 1))] for i in range(n)] if n > 1 else rows[:1]
+
+
+def _pairs_sheet(out: Path, rows: list[dict], n: int = PAIR_ROWS) -> np.ndarray:
+    """Successes (left) beside failures (right), each row target | shadow | overlay under a
+    line naming the target and its IoU, HD95 and thin-part recall; a title above each side."""
+    from PIL import Image, ImageDraw
+
+    sides = [_spread([r for r in rows if r["success"]], n), _spread([r for r in rows if not r["success"]], n)]
+    tiles = [[_labelled(out, r) for r in side] for side in sides]
+    h, w = max(t.shape[0] for side in tiles for t in side), max(t.shape[1] for side in tiles for t in side)
+    gap, head = 12, 22
+    sheet = np.full((head + max(map(len, tiles)) * h, 2 * w + gap, 3), 255, np.uint8)
+    for c, side in enumerate(tiles):
+        for i, tile in enumerate(side):
+            sheet[head + i * h : head + i * h + tile.shape[0], c * (w + gap) : c * (w + gap) + tile.shape[1]] = tile
+    image = Image.fromarray(sheet)
+    draw = ImageDraw.Draw(image)
+    ok = sum(bool(r["success"]) for r in rows)
+    titles = (f"successes: {ok} of {len(rows)}", f"failures: {len(rows) - ok} of {len(rows)}")
+    for c, title in enumerate(titles):
+        draw.text((c * (w + gap) + 4, 5), title + f" (showing {len(sides[c])}, spread over IoU)", fill=(0, 0, 0))
+    return np.asarray(image)
+
+
+def _labelled(out: Path, row: dict, tile: int = 128) -> np.ndarray:
+    """A sheet row of a result folder under a line of its name and measures."""
+    from PIL import Image, ImageDraw
+
+    body = _sheet_row(out / row["name"], row["success"], tile)
+    label = Image.new("RGB", (body.shape[1], 16), (255, 255, 255))
+    text = f"{row['name']}  IoU {row['iou']:.3f}  HD95 {row['hd95']:.3f}  thin {row['thin_recall']:.2f}"
+    ImageDraw.Draw(label).text((4, 2), text, fill=(0, 0, 0))
+    return np.concatenate([np.asarray(label), body], 0)
 
 
 def fits_only(targets, config: FitConfig, workers: int, threads: int) -> None:

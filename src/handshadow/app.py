@@ -40,7 +40,7 @@ from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, LAMP_TO_WALL_RA
 
 MAX_UPLOAD = "8mb"
 # The page fits as the command line does unless asked otherwise: on the 95 HSP shapes (2-core
-# CPU, README, 2026-12-05/06) fast passed the success test on 51 % in a median 14 s (up to
+# CPU, docs/measured.md, 2026-12-05/06) fast passed the success test on 51 % in a median 14 s (up to
 # a minute when it hops), default on 86 % in a median 33 s with its settling (a shape it fails
 # takes up to 5 min).
 DEFAULT_QUALITY = "default"  # FitConfig.quality (a test holds them equal)

@@ -68,7 +68,7 @@ CONTACTS_EVERY = 10
 # The exact-outline stages (blur at most this many pixels, skeleton guides at most this factor)
 # weigh spills and the target's holes and notches as the polish does (Finishing's
 # polish_spill and polish_notches), and thin parts at OUTLINE_THIN (twice Weights.thin): the
-# spill weight alone pulled thin parts in as it pulled spills back (README, **Outline stages**).
+# spill weight alone pulled thin parts in as it pulled spills back (docs/measured.md, **Outline stages**).
 OUTLINE_STAGE_BLUR_PX = 1.0
 OUTLINE_STAGE_SKELETON = 0.05
 CUDA_WIDER = 16  # on a GPU the search keeps this many times the hypotheses (see schedule)
@@ -85,7 +85,7 @@ VIEWS_POLISH_ROUNDS = {"fast": (2, 0, 1), "default": (4, 8, 3), "best": (6, 12, 
 # the best result is kept. On the 64 of 95 HSP targets that the first attempt failed, a second
 # turned 10 into successes (9 with the next seed alone); on the 35 that two attempts failed
 # (2026-12-03), a third turned 5 into successes; on the 30 that three failed, a fourth 3 and a
-# fifth 3 of the 27 left, a sixth 1 of 24 (2026-12-04, README, Fitting). A pass costs no more;
+# fifth 3 of the 27 left, a sixth 1 of 24 (2026-12-04, docs/measured.md, **Fitting**). A pass costs no more;
 # a failure costs every attempt.
 ATTEMPTS = {"fast": 1, "default": 5, "best": 6}
 SKIP_TRIED = True  # a later attempt leaves out the library and atlas starts an earlier one searched
@@ -93,11 +93,11 @@ SKIP_TRIED = True  # a later attempt leaves out the library and atlas starts an 
 # config.Hops.reach_hd95): its fine stages again from harder-jittered copies, separated and
 # polished, the better kept. On the 20 near misses of the default's run on the 95 HSP targets,
 # 2 hops turned 5 into successes, each in its first attempt; reaching HD95 0.06 rather than
-# 0.04 passed 3 of 31 farther failures (README, Hops). A third hop, weighing the wrong regions
+# 0.04 passed 3 of 31 farther failures (docs/measured.md, Hops). A third hop, weighing the wrong regions
 # past the HD95 bar (config.Hops.far_hops), passed 4 of 18 first attempts that two hops left
-# within reach; three plain hops passed 3 (README, **A far hop**). Fast hops as the default
+# within reach; three plain hops passed 3 (docs/measured.md, **A far hop**). Fast hops as the default
 # does: on the 95 HSP targets it then passed 44 rather than 31 and lost none, a median 13.4 s
-# against 12.1 s; a result within reach takes 20 to 80 s (README, **Fast hops**). Near-miss
+# against 12.1 s; a result within reach takes 20 to 80 s (docs/measured.md, **Fast hops**). Near-miss
 # polish rounds alone passed 1 of the first 43 it failed. With the wider fast schedule
 # (schedule) 48 pass in a median 14.1 s, one fit at a time.
 HOPS = {"fast": 3, "default": 3, "best": 4}
@@ -109,7 +109,7 @@ GIVE_UP = {"fast": None, "default": GiveUp(), "best": GiveUp()}
 # shadow at a steady rate, the outline's weights and then the area's (search.finishing.settle;
 # None: off). The search's last stage anneals to zero within 100 steps and leaves shadows a few
 # pixels off all along their outline. On 48 HSP first attempts it raised the median IoU from
-# 0.893 to 0.900 in a median 9 s and turned no failure into a pass (README, **Settling**).
+# 0.893 to 0.900 in a median 9 s and turned no failure into a pass (docs/measured.md, **Settling**).
 SETTLE = {"fast": None, "default": Settle(), "best": Settle()}
 
 
@@ -262,7 +262,7 @@ def schedule(
     the last, hands inside each other pass one in front of the other (Stage.layer). The
     exact-outline stages weigh spills, notches and thin parts more (OUTLINE_THIN and the
     polish's weights). Fast is the default's shape at about two-thirds of its starts and
-    steps, and keeps fewer hypotheses (README, **Atlas pairs one person can hold**, **Fast
+    steps, and keeps fewer hypotheses (docs/measured.md, **Atlas pairs one person can hold**, **Fast
     hops**)."""
     if quality not in QUALITY:
         raise ValueError(f"quality must be one of {', '.join(QUALITY)}")

@@ -45,7 +45,7 @@ LAMP_TO_WALL_M = 2.0
 LAMP_TO_WALL_RANGE_M = (LAMP_TO_WALL_M, 5.0)
 # A fit's lamp unless told otherwise (one view; two views keep LAMP_TO_WALL_M): a forearm
 # 28 cm behind its hand is magnified 1.16 times the hand's scale here, 1.39 times at 2 m, so
-# it hides behind the hand far better (README, "Lamp distance": 16 HSP targets, 10 against 8).
+# it hides behind the hand far better (docs/measured.md, "Lamp distance": 16 HSP targets, 10 against 8).
 FIT_LAMP_TO_WALL_M = 4.0
 FRAME_HEIGHT_M = {"point": 0.8, "directional": 0.4}  # a hand's shadow fills about half of it
 # Where hands belong, as distances in front of the wall (Scene.placement_range):

@@ -118,7 +118,7 @@ def test_without_gradio_the_app_says_how_to_install_it():
 
 
 def test_the_page_fits_as_the_command_line_does_unless_asked_otherwise():
-    # fast passed the success test on 4 of 95 HSP shapes, the default on 44 (README): a page
+    # fast passed the success test on 4 of 95 HSP shapes, the default on 44 (docs/measured.md): a page
     # that starts on fast shows most visitors a blob.
     from handshadow.app import DEFAULT_QUALITY, FitOptions
     from handshadow.fit import FitConfig

@@ -54,7 +54,7 @@ class Stage:
 
 
 # The exact-outline stages (fit.schedule) and the settling weigh thin parts this much (twice
-# Weights.thin; README, **Outline stages**).
+# Weights.thin; docs/measured.md, **Outline stages**).
 OUTLINE_THIN = 8.0
 
 # The image term's extra weight on the error regions past the HD95 bar (objective.FarOutline)
@@ -153,7 +153,7 @@ class Finishing:
     polish_penetration: float = 100.0
     # The wrong regions past the HD95 bar weigh this much more in the polish's image term
     # (objective.FarOutline). The polish runs only on a result that fails; on 15 HSP targets
-    # it turned 5 first-attempt near misses into passes (README, **Far regions**).
+    # it turned 5 first-attempt near misses into passes (docs/measured.md, **Far regions**).
     polish_far: float = 6.0
     jitter: tuple[float, float, float] = (0.15, 0.01, 0.002)
 
@@ -214,7 +214,7 @@ class Hops:
     fails with IoU met, thin-part recall at most ``reach_thin`` short of its bar and HD95 at
     most ``reach_hd95`` past its bar: three times the polish's near miss
     (metrics.NEAR_MISS_HD95), an outline at most twice as far off as the bar allows. On 31 HSP targets that failed with HD95 beyond 0.04, reaching 0.03
-    rather than 0.01 passed 3 more (README, Hops)."""
+    rather than 0.01 passed 3 more (docs/measured.md, Hops)."""
 
     copies: int = 8
     jitter: tuple[float, float, float] = (0.5, 0.05, 0.01)
@@ -226,7 +226,7 @@ class Hops:
     focus_share: float = 0.05  # a finger within this share of the frame height of it is near
     # The last far_hops hops weigh the wrong regions past the HD95 bar as much more in their
     # stages as the polish does (Stage.far, objective.FarOutline); the hops before them do not,
-    # so the plain hops' passes stay (README, **A far hop**).
+    # so the plain hops' passes stay (docs/measured.md, **A far hop**).
     far: float = Finishing.polish_far
     far_hops: int = 1
 
@@ -241,7 +241,7 @@ class GiveUp:
     are not counted: a finger still moves onto a thin part late. On the 95 HSP first attempts
     (seed 0) the default, after the 128 px stage, stops 14 of the 40 that fail and none of the
     55 that pass. Of those passes there, one (a thin snake) had IoU 0.778 at best, with HD95
-    0.027; the others had IoU 0.82 or more, and one HD95 0.060 at best (README, **Giving up**)."""
+    0.027; the others had IoU 0.82 or more, and one HD95 0.060 at best (docs/measured.md, **Giving up**)."""
 
     after_stage: int = 1
     iou_margin: float = 0.03
