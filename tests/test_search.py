@@ -407,6 +407,26 @@ def test_a_failed_fit_starts_afresh_with_fresh_starts_and_keeps_the_better(monke
     assert once.posed.fit["attempts_run"] == 1 and np.array_equal(once.shadow, single.shadow)
 
 
+def test_fast_starts_afresh_only_from_a_result_within_reach(monkeypatch):
+    from handshadow import fit as fit_module
+
+    target, _ = known_target("dog", 64)
+    monkeypatch.setitem(fit_module.POLISH_ROUNDS, "fast", (0, 0, 1))  # so the first attempt fails (as above)
+    assert fit_module.ATTEMPTS["fast"] > 1 and fit_module.AFRESH_ONLY_WITHIN_REACH["fast"]
+    base = FitConfig(hands="1", size=64, quality="fast", iters=2, exclude_library=("dog",), hops=0)
+    far = fit_frame(target, base)  # far from passing after two steps a stage: fast's own attempts end
+    assert not far.success and not fit_module.within_reach(far)
+    assert far.posed.fit["attempts_run"] == 1
+    # An explicit count is run in full, near or far.
+    assert fit_frame(target, dataclasses.replace(base, attempts=2)).posed.fit["attempts_run"] == 2
+    # Within reach, fast's own attempts go on to the last while none passes.
+    results = []
+    monkeypatch.setattr(fit_module, "within_reach", lambda r: results.append(r) or True)
+    near = fit_frame(target, base)
+    assert near.posed.fit["attempts_run"] == fit_module.ATTEMPTS["fast"] == len(results) + 1
+    assert not any(r.success for r in results)
+
+
 def test_a_stop_in_a_later_attempt_keeps_the_best_so_far(monkeypatch):
     from handshadow import fit as fit_module
 

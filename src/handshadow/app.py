@@ -40,13 +40,14 @@ from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, LAMP_TO_WALL_RA
 
 MAX_UPLOAD = "8mb"
 # The page fits as the command line does unless asked otherwise: on the 95 HSP shapes (2-core
-# CPU, docs/measured.md, 2026-12-05/06) fast passed the success test on 51 % in a median 14 s (up to
-# a minute when it hops), default on 86 % in a median 33 s with its settling (a shape it fails
-# takes up to 5 min).
+# CPU, docs/measured.md, 2026-12-06) fast passed the success test on 61 % in a median 14 s (a near
+# miss hops and tries again, up to about 3.5 min), default on 86 % in a median 33 to 41 s with
+# its settling (a shape it fails takes up to about 7 min).
 DEFAULT_QUALITY = "default"  # FitConfig.quality (a test holds them equal)
 QUALITY_HELP = (
-    "default: about half a minute, up to 5 minutes for a shape it cannot reach, as the command line;"
-    " fast: about 14 s, a rough first look that matches half of shapes; best: longer (a 2-core CPU)"
+    "default: about half a minute, up to about 7 minutes for a shape it cannot reach, as the command line;"
+    " fast: about 14 s, a rough first look that matches three in five shapes (longer on a near miss);"
+    " best: longer (a 2-core CPU)"
 )
 INSTALL_HINT = "the app needs Gradio, an optional extra: pip install 'handshadow[app]'"
 # Set before Gradio (and the Hugging Face hub it imports) reads them: no analytics, no telemetry, offline.

@@ -231,9 +231,9 @@ def _add_fit_options(
         default=quality_default,
         choices=["fast", "default", "best"],
         help=f"search effort (default: {quality_default}); on a 2-core CPU a two-hand fit takes about 14 s fast"
-        " (one short attempt: a rough look, half the HSP shapes pass; up to about a minute when it"
-        " hops from a near miss), default about 30 s when its first"
-        " attempt passes and up to 5 min when every attempt fails, best longer",
+        " (short attempts: a rough look, three in five HSP shapes pass; a far miss ends after one,"
+        " a near miss hops and tries again, up to about 3.5 min), default about 30 s when its first"
+        " attempt passes and up to about 7 min when every attempt fails, best longer",
     )
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     p.add_argument("--seed", type=int, default=0)
@@ -242,7 +242,7 @@ def _add_fit_options(
         type=int,
         help="fresh starts (seed, seed+1, ...) while the result fails the success test, the best kept; "
         "with default and best an attempt but the last gives up early when it is out of reach "
-        "(default: 1 fast, 5 default, 6 best)",
+        "(default: 5 default, 6 best; fast up to 4, a further one only after a near miss; a number given runs in full)",
     )
     p.add_argument(
         "--hops",

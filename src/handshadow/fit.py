@@ -86,8 +86,16 @@ VIEWS_POLISH_ROUNDS = {"fast": (2, 0, 1), "default": (4, 8, 3), "best": (6, 12, 
 # turned 10 into successes (9 with the next seed alone); on the 35 that two attempts failed
 # (2026-12-03), a third turned 5 into successes; on the 30 that three failed, a fourth 3 and a
 # fifth 3 of the 27 left, a sixth 1 of 24 (2026-12-04, docs/measured.md, **Fitting**). A pass costs no more;
-# a failure costs every attempt.
-ATTEMPTS = {"fast": 1, "default": 5, "best": 6}
+# a failure costs every attempt. Fast's further attempts start only from a near result (below).
+ATTEMPTS = {"fast": 4, "default": 5, "best": 6}
+# With these qualities' own attempts (FitConfig.attempts None; an explicit count runs in full),
+# a failed attempt starts afresh only when its result is within reach of the success test (the
+# hops' reach, config.Hops): fast answers a far miss at once and spends its further attempts
+# where a pass is near. On the 22 of 95 HSP targets whose first fast attempt failed within
+# reach, attempts 2 to 4 passed 10 (5 second, 3 third, 2 fourth), so fast passes 58 rather than
+# 48; a far miss still ends after one attempt, so the median time stays 14.1 s, and a near miss
+# takes up to about 3.5 min (docs/measured.md, **Fast's attempts from a near miss**).
+AFRESH_ONLY_WITHIN_REACH = {"fast": True, "default": False, "best": False}
 SKIP_TRIED = True  # a later attempt leaves out the library and atlas starts an earlier one searched
 # Hops an attempt may make from a result within reach after its finishing steps (search.hops,
 # config.Hops.reach_hd95): its fine stages again from harder-jittered copies, separated and
@@ -103,7 +111,8 @@ SKIP_TRIED = True  # a later attempt leaves out the library and atlas starts an 
 HOPS = {"fast": 3, "default": 3, "best": 4}
 # An attempt that is not the last stops after the 128 px stage when every hypothesis there is
 # out of reach (search.config.GiveUp), and the next starts afresh: the stages, finishing steps
-# and hops after it cost 15 s or more and would not pass. Fast makes one attempt.
+# and hops after it cost 15 s or more and would not pass. Fast's attempts run to their end
+# (AFRESH_ONLY_WITHIN_REACH: a further one follows only a near result).
 GIVE_UP = {"fast": None, "default": GiveUp(), "best": GiveUp()}
 # Last of an attempt's finishing steps, after the hops: a result that passes settles into its
 # shadow at a steady rate, the outline's weights and then the area's (search.finishing.settle;
@@ -361,6 +370,7 @@ def fit_frame(
     t0 = time.perf_counter()
     config = dataclasses.replace(config, device=resolve_device(config.device))
     attempts = attempts_of(config)
+    reach_only = config.attempts is None and AFRESH_ONLY_WITHIN_REACH[config.quality]
     hops_of(config)  # a bad count fails before the search, not after it
     check_seed(config.seed)
     # torch.optim imports torch._dynamo on first use, for seconds; a Ctrl-C inside that import
@@ -408,6 +418,9 @@ def fit_frame(
         if best is None or result_key(result) < result_key(best):
             best, chosen = result, k
         if best.success or interrupted or (stop is not None and stop()):
+            break
+        if k + 1 < attempts and reach_only and not within_reach(result):
+            log.info("attempt %d of %d failed out of reach (%s): no fresh start", k + 1, attempts, result.score)
             break
         if k + 1 < attempts:
             log.info("attempt %d of %d failed the success test (%s): a fresh start", k + 1, attempts, result.score)
@@ -468,6 +481,14 @@ def hops_of(config: FitConfig) -> int:
     if hops < 0:
         raise HandshadowError(f"hops cannot be negative, got {hops}")
     return hops
+
+
+def within_reach(result: FitResult) -> bool:
+    """Whether a failed result is within the hops' reach of the success test in every view
+    (config.Hops, metrics.ViewScores.within)."""
+    settings = Hops()
+    scores = ViewScores(tuple(v.score for v in result.views), tuple(v.weight for v in result.views))
+    return scores.within(settings.reach_hd95, settings.reach_thin)
 
 
 def result_key(result: FitResult) -> tuple:
