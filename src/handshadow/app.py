@@ -41,7 +41,7 @@ from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, LAMP_TO_WALL_RA
 MAX_UPLOAD = "8mb"
 # The page fits as the command line does unless asked otherwise: on the 95 HSP shapes (2-core
 # CPU, docs/measured.md, 2026-12-06) fast passed the success test on 61 % in a median 14 s (a near
-# miss hops and tries again, up to about 3.5 min), default on 86 % in a median 33 to 41 s with
+# miss hops and tries again, up to about 3 min), default on 86 % in a median 33 to 41 s with
 # its settling (a shape it fails takes up to about 7 min).
 DEFAULT_QUALITY = "default"  # FitConfig.quality (a test holds them equal)
 QUALITY_HELP = (

@@ -93,8 +93,9 @@ ATTEMPTS = {"fast": 4, "default": 5, "best": 6}
 # hops' reach, config.Hops): fast answers a far miss at once and spends its further attempts
 # where a pass is near. On the 22 of 95 HSP targets whose first fast attempt failed within
 # reach, attempts 2 to 4 passed 10 (5 second, 3 third, 2 fourth), so fast passes 58 rather than
-# 48; a far miss still ends after one attempt, so the median time stays 14.1 s, and a near miss
-# takes up to about 3.5 min (docs/measured.md, **Fast's attempts from a near miss**).
+# 48 (issue 14's command, one fit at a time); a far miss still ends after one attempt, so the
+# median time stays 13.6 s, and a near miss takes up to about 3 min (docs/measured.md, **Fast's
+# attempts from a near miss**).
 AFRESH_ONLY_WITHIN_REACH = {"fast": True, "default": False, "best": False}
 SKIP_TRIED = True  # a later attempt leaves out the library and atlas starts an earlier one searched
 # Hops an attempt may make from a result within reach after its finishing steps (search.hops,
