@@ -1,9 +1,10 @@
 """Recovery benchmark: shadows that hands made, fitted back. It measures the search alone:
 every target is the exact shadow of a random, anatomically valid, performable pose of two
-hands (with forearms, or without with --no-forearm) at a random place between lamp and wall.
+hands (or of one with --hands 1; with forearms, or without with --no-forearm) at a random
+place between lamp and wall.
 
-    python bench/recover.py [--n 40] [--seed 2026] [--no-forearm] [--quality default] [--out out/recover]
-                            [--part K/N]
+    python bench/recover.py [--n 40] [--seed 2026] [--hands 2] [--no-forearm] [--quality default]
+                            [--out out/recover] [--part K/N]
 
 --part K/N fits only the targets k with k % N == K (all are still drawn, so each keeps its pose):
 N processes with K = 0 .. N-1, e.g. on one GPU, share the work; each writes rows-K-of-N.json.
@@ -12,7 +13,9 @@ The poses come from their own generator (uniform joint angles within the limits,
 orientation whose forearm leads back toward the lamp, hands within a person's reach), never
 from the search's starts. A pose is kept only if it is performable (no vertex more than 3 mm
 inside other flesh, docs/performing.md) and its shadow lies well inside the frame. Each target
-is fitted with the defaults (FitConfig(), hands auto) and judged by the success test.
+is fitted with the defaults (FitConfig(), hands auto: with --hands 1 the fit must find that one
+hand does) and judged by the success test. With --hands 1 each target's hand is the right or
+the left one at random; the two-hand targets are those of earlier runs, draw for draw.
 Prints one row per target and
 SUMMARY n=<n> success=<share> performable_success=<share> median_iou=<x> median_s=<x>
 """
@@ -80,8 +83,11 @@ def _turn_z_to(axis: np.ndarray) -> np.ndarray:
     return np.eye(3) + sin * cross + (1 - cos) * cross @ cross
 
 
-def random_target(rng: np.random.Generator, forearm: bool, tries: int = 200) -> tuple[PosedScene, np.ndarray]:
-    """A performable two-hand pose whose shadow lies well inside the frame, and the shadow."""
+def random_target(
+    rng: np.random.Generator, forearm: bool, tries: int = 200, n_hands: int = 2
+) -> tuple[PosedScene, np.ndarray]:
+    """A performable pose of ``n_hands`` hands (2: right and left; 1: either) whose shadow lies
+    well inside the frame, and the shadow."""
     scene = Scene.default(SIZE, SIZE, lamp_to_wall_m=FIT_LAMP_TO_WALL_M)  # the lamp a default fit uses
     lamp = np.asarray(scene.light.position)
     for _ in range(tries):
@@ -89,7 +95,11 @@ def random_target(rng: np.random.Generator, forearm: bool, tries: int = 200) -> 
         middle = lamp + np.array([rng.normal(0, 0.04), rng.normal(0, 0.04), -depth])
         offset = rng.normal(0, 1, 3) * np.array([1.0, 0.6, 0.3])
         offset *= rng.uniform(0.06, MAX_WRIST_GAP_M / 2) / np.linalg.norm(offset)
-        hands = (random_hand("right", rng, middle + offset), random_hand("left", rng, middle - offset))
+        if n_hands == 1:
+            side = "right" if rng.uniform() < 0.5 else "left"
+            hands = (random_hand(side, rng, middle + offset),)
+        else:
+            hands = (random_hand("right", rng, middle + offset), random_hand("left", rng, middle - offset))
         posed = PosedScene(hands, scene, forearm)
         try:
             meshes, mask = cast_shadow(posed)
@@ -111,6 +121,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=40)
     parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--hands", type=int, default=2, choices=[1, 2], help="hands that cast each target")
     parser.add_argument("--no-forearm", action="store_true")
     parser.add_argument("--quality", default="default", choices=["fast", "default", "best"])
     parser.add_argument("--out", default="out/recover")
@@ -126,13 +137,14 @@ def main() -> None:
     (out / "targets").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
     forearm = not args.no_forearm
-    print(f"{args.n} random two-hand poses, forearm={forearm}, seed={args.seed}, quality={args.quality}")
+    kind = "two-hand" if args.hands == 2 else "one-hand"
+    print(f"{args.n} random {kind} poses, forearm={forearm}, seed={args.seed}, quality={args.quality}")
     print(
         f"{'target':10s} {'IoU':>6s} {'HD95':>6s} {'thin':>5s} {'ok':>3s} {'pen':>5s} {'hold':>4s} {'hands':>5s} {'s':>6s}"
     )
     rows = []
     for k in range(args.n):
-        truth, target = random_target(rng, forearm)
+        truth, target = random_target(rng, forearm, n_hands=args.hands)
         if k % parts != part:
             continue
         name = f"pose{k:02d}"

@@ -228,6 +228,11 @@ class FitResult:
         """Every view's shadow passes the success test and the pose is performable."""
         return all(v.score.success for v in self.views) and self.performable
 
+    @property
+    def view_scores(self) -> ViewScores:
+        """Every view's measures and weight, view 0 first (metrics.ViewScores)."""
+        return ViewScores(tuple(v.score for v in self.views), tuple(v.weight for v in self.views))
+
 
 @dataclasses.dataclass
 class HandCountFit:
@@ -488,15 +493,13 @@ def within_reach(result: FitResult) -> bool:
     """Whether a failed result is within the hops' reach of the success test in every view
     (config.Hops, metrics.ViewScores.within)."""
     settings = Hops()
-    scores = ViewScores(tuple(v.score for v in result.views), tuple(v.weight for v in result.views))
-    return scores.within(settings.reach_hd95, settings.reach_thin)
+    return result.view_scores.within(settings.reach_hd95, settings.reach_thin)
 
 
 def result_key(result: FitResult) -> tuple:
     """Sort key of finished fits, smaller is better: performable first, then the views'
     success and blend (metrics.ViewScores.key; with one view metrics.rank_key)."""
-    scores = ViewScores(tuple(v.score for v in result.views), tuple(v.weight for v in result.views))
-    return (not result.performable, *scores.key())
+    return (not result.performable, *result.view_scores.key())
 
 
 def _skip_attempt(targets, scenes, config, extra_starts, anchor, tried: dict[int, set]) -> None:
