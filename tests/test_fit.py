@@ -256,3 +256,25 @@ def test_a_bad_count_from_python_fails_before_the_search(field, value, words, mo
     target[8:24, 10:22] = True
     with pytest.raises(HandshadowError, match=words):
         fit_frame(target, dataclasses.replace(FitConfig(size=32, quality="fast"), **{field: value}))
+
+
+def test_hands_auto_takes_one_hand_when_its_search_passes():
+    from types import SimpleNamespace
+
+    from handshadow.fit import ONE_HAND_PREFERENCE, HandCountFit
+
+    def search(n_hands, failed, blend, unholdable=False):
+        return HandCountFit(n_hands, [], None, SimpleNamespace(key=(unholdable, failed, -blend)))
+
+    def chosen(*searches):
+        return min(searches, key=HandCountFit.preference_key).n_hands
+
+    # both pass: one hand, however much better two hands fit
+    assert chosen(search(1, 0.0, 1.0), search(2, 0.0, 1.3)) == 1
+    # only two hands pass, or only they can be held: two hands
+    assert chosen(search(1, 1.0, 1.3), search(2, 0.0, 1.0)) == 2
+    assert chosen(search(1, 0.0, 1.3, unholdable=True), search(2, 0.0, 1.0)) == 2
+    # neither passes: one hand unless two blend better by more than the preference
+    margin = ONE_HAND_PREFERENCE
+    assert chosen(search(1, 1.0, 1.0), search(2, 1.0, 1.0 + margin / 2)) == 1
+    assert chosen(search(1, 1.0, 1.0), search(2, 1.0, 1.0 + 2 * margin)) == 2

@@ -222,7 +222,8 @@ def _add_fit_options(
         "--hands",
         default=hands_default,
         choices=["1", "2", "auto"] if hands_default == "auto" else ["1", "2"],
-        help=f"number of hands (default: {hands_default})",
+        help=f"number of hands (default: {hands_default})"
+        + ("; auto tries both, one hand when it passes the success test" if hands_default == "auto" else ""),
     )
     p.add_argument("--size", type=int, default=256, help="frame height and width in pixels (default 256)")
     p.add_argument("--iters", type=int, help="total optimisation steps (default: set by --quality)")

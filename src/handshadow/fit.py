@@ -60,7 +60,9 @@ QUALITY = ("fast", "default", "best")
 # after one that brought nothing (search.finishing.polish). Fast hunts a near miss's last
 # pixels as the default does (with its hops below).
 POLISH_ROUNDS = {"fast": (1, 8, 3), "default": (2, 8, 3), "best": (3, 12, 4)}
-# --hands auto prefers one hand unless two score better by more than this (rank-key blend).
+# --hands auto takes one hand when its search passes the success test (a person makes the shape
+# with one hand and keeps the other free); when neither passes, one hand unless two score better
+# by more than this (rank-key blend).
 ONE_HAND_PREFERENCE = 0.02
 # The stages at full resolution push out what the exact mesh test finds inside other flesh,
 # found afresh every this many steps (search.objective.ExactContacts; 0 turns it off).
@@ -127,7 +129,7 @@ SETTLE = {"fast": None, "default": Settle(), "best": Settle()}
 class FitConfig:
     """Everything a fit needs besides the target.
 
-    hands: '1', '2' or 'auto' (tries both, prefers one hand when it does as well);
+    hands: '1', '2' or 'auto' (tries both; one hand when it passes, or does nearly as well);
     size: frame height in pixels that pipeline and the CLI resize the target to (width follows
     the target frame; fit_frame itself fits at the target's own size); iters: total optimisation
     steps (None: the quality's default); quality: 'fast', 'default' or 'best';
@@ -246,9 +248,12 @@ class HandCountFit:
     separation_iou: float | None = None  # the shadow after the separation against before it
 
     def preference_key(self) -> tuple:
-        """Rank key with the one-hand preference: smaller is better."""
+        """Rank key with the one-hand preference, smaller is better: arms that can be held
+        first, then the views' failed share; among passes one hand before two; then the blend,
+        one hand ahead by ONE_HAND_PREFERENCE."""
         unholdable, failed, blend = self.search.key
-        return unholdable, failed, blend - (ONE_HAND_PREFERENCE if self.n_hands == 1 else 0.0)
+        one = self.n_hands == 1
+        return unholdable, failed, not (one and not failed), blend - (ONE_HAND_PREFERENCE if one else 0.0)
 
 
 def resolve_device(name: str) -> str:
