@@ -473,7 +473,13 @@ def _fit_options(gr) -> dict:
     """The Options accordion's components, by ShadowTab field."""
     with gr.Accordion("Options", open=False):
         return {
-            "hands": gr.Radio(["1", "2", "auto"], value="auto", label="Hands", elem_id="hands"),
+            "hands": gr.Radio(
+                ["1", "2", "auto"],
+                value="auto",
+                label="Hands",
+                info="auto tries both: one hand when one makes the shape, else two",
+                elem_id="hands",
+            ),
             "quality": gr.Radio(
                 ["fast", "default", "best"],
                 value=DEFAULT_QUALITY,
