@@ -228,7 +228,7 @@ class FitResult:
     @property
     def success(self) -> bool:
         """Every view's shadow passes the success test and the pose is performable."""
-        return all(v.score.success for v in self.views) and self.performable
+        return self.view_scores.success and self.performable
 
     @property
     def view_scores(self) -> ViewScores:
