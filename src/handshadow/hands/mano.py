@@ -21,6 +21,7 @@ import numpy as np
 import scipy.sparse
 
 from handshadow.errors import HandshadowError
+from handshadow.hands.forearm import sized_like
 from handshadow.hands.rig import HandRig, Side, canonicalise, check_side, fingertip_vertices
 
 # Our joint order (thumb, index, middle, ring, little) -> MANO joint index.
@@ -229,7 +230,7 @@ def load_mano_rig(mano_dir: str | Path, side: str = "right", shape=None) -> Hand
     cols = (MANO_JOINTS[:, None] - 1) * 9 + np.arange(9)[None]
     posedirs = posedirs[:, cols.ravel()]
     tips = fingertip_vertices(arrays["vertices"], weights, arrays["joints"], MANO_JOINTS)
-    return canonicalise(
+    rig = canonicalise(
         side,
         "mano",
         vertices=arrays["vertices"],
@@ -242,6 +243,9 @@ def load_mano_rig(mano_dir: str | Path, side: str = "right", shape=None) -> Hand
         tip_vertices=tips,
         posedirs=posedirs,
     )
+    if not betas.any():
+        return rig
+    return sized_like(rig, load_mano_rig(mano_dir, side))
 
 
 def mano_hands_mean(mano_dir: str | Path, side: str) -> np.ndarray:

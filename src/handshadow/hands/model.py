@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from handshadow.hands import kinematics
-from handshadow.hands.forearm import FOREARM_LENGTH_M, attach_forearm, cap_wrist, forearm_axis, wrist_centre
+from handshadow.hands.forearm import attach_forearm, cap_wrist, forearm_axis, forearm_length_m, wrist_centre
 from handshadow.hands.rig import N_JOINTS, HandRig
 
 
@@ -61,7 +61,7 @@ class HandModel(torch.nn.Module):
         )
         if forearm:
             centre, axis = forearm_axis(rig)
-            axis_points = centre + np.linspace(0.04, FOREARM_LENGTH_M, 6)[:, None] * axis
+            axis_points = centre + np.linspace(0.04 * rig.size, forearm_length_m(rig), 6)[:, None] * axis
         else:
             axis_points = np.zeros((0, 3))
         self.register_buffer("forearm_axis_points", torch.as_tensor(axis_points, dtype=dtype))

@@ -84,9 +84,9 @@ def hand_spheres(rig: HandRig, forearm: bool = True, per_segment: int = 3) -> Sp
         centre, axis = forearm_axis(rig)
         ring = verts[rig.wrist_loop]
         radius0 = np.min(np.linalg.norm(np.cross(ring - centre, axis), axis=1))  # the flat side
-        for s in np.linspace(0.04, FOREARM_LENGTH_M - 0.02, 8):
+        for s in np.linspace(0.04, FOREARM_LENGTH_M - 0.02, 8) * rig.size:
             centres.append(centre + s * axis)
-            radii.append(radius0 * forearm_scale(s) * SHRINK)
+            radii.append(radius0 * forearm_scale(s, rig.size) * SHRINK)
             bones.append(len(rig.bone_parents))  # the forearm bone, after the rig's bones
             parts.append(FOREARM)
             segments.append(-1)

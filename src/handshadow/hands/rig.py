@@ -64,6 +64,12 @@ class HandRig:
             flattened (R_j - I) of the joint rotations in the backend's native frame.
         native_rotation: (3, 3) rotation from the backend's native frame to the hand frame
             (needed to apply posedirs); identity when posedirs is None.
+        size: the hand's length (:func:`hand_length_m`) as a share of its model's default
+            shape's: a person's forearm grows with their hand, so the forearm's lengths scale
+            by it (hands.forearm).
+        forearm_direction: optional (3,) unit axis of the forearm, hand frame; None: the normal
+            of the wrist opening (hands.forearm.forearm_axis). A shape other than the model's
+            default takes the default's, so its forearm leads the same way.
     """
 
     side: Side
@@ -79,6 +85,8 @@ class HandRig:
     wrist_loop: np.ndarray
     posedirs: np.ndarray | None = None
     native_rotation: np.ndarray = dataclasses.field(default_factory=lambda: np.eye(3))
+    size: float = 1.0
+    forearm_direction: np.ndarray | None = None
 
     @property
     def num_vertices(self) -> int:
@@ -88,6 +96,12 @@ class HandRig:
     def joint_heads(self) -> np.ndarray:
         """(15, 3) rest position of each articulated joint."""
         return self.bone_heads[self.joint_bones]
+
+
+def hand_length_m(rig: HandRig) -> float:
+    """The hand's length in metres as a person measures theirs: from the wrist (the hand
+    frame's origin) to the tip of the middle finger, in the rest pose."""
+    return float(np.linalg.norm(rig.rest_vertices[rig.tip_vertices[2]]))
 
 
 def hand_frame(
