@@ -5,6 +5,7 @@ success). It runs on `handshadow batch` (Dask), so it scales out with --workers 
     python bench/fit.py ../shared/targets/hsp [--limit N] [--names a,b] [--hands 2] [--out out/bench]
                         [--workers N] [--threads-per-worker T] [--scheduler tcp://HOST:8786] [--resume]
                         [--fits-only] [--sheets-only] [--no-forearm] [--lamp-distance M] [--hops N] [--attempts N] [--skip-attempts N]
+                        [--hand-shape SHAPE]
 
 Prints one row per target as it finishes: the shadow's measures, the deepest penetration
 between or within the hands (pen, mm, exact on the meshes), whether the pose can be held
@@ -29,6 +30,7 @@ them, without start-up or export.)
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -39,6 +41,7 @@ import numpy as np
 from scipy import ndimage
 
 from handshadow.batch import find_targets, run_batch
+from handshadow.cli import parse_hand_shape
 from handshadow.errors import HandshadowError
 from handshadow.fit import FitConfig, attempts_of, hops_of, skipped_attempts
 from handshadow.hands.penetration import TOLERANCE_MM as PENETRATION_TOLERANCE_MM
@@ -83,6 +86,7 @@ def main() -> None:
         help="run only the attempts after the first N (their starts left out as if searched): a further"
         " attempt measured on an earlier run's failures alone",
     )
+    parser.add_argument("--hand-shape", help="the hands' build (handshadow fit --hand-shape), e.g. height=0.8")
     parser.add_argument("--workers", type=int, default=1, help="local Dask workers, each fitting one target at a time")
     parser.add_argument("--threads-per-worker", type=int, help="torch threads per worker (default: cores / workers)")
     parser.add_argument("--scheduler", help="an existing Dask cluster instead of a local one")
@@ -133,6 +137,8 @@ def main() -> None:
     )
     try:  # a bad count fails here in one line, not in every worker
         attempts_of(config), hops_of(config), skipped_attempts(config)
+        if args.hand_shape:
+            config = dataclasses.replace(config, hand_shape=parse_hand_shape(args.hand_shape, config.hand_model))
     except HandshadowError as e:
         parser.error(str(e))
     if args.fits_only:

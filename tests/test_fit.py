@@ -122,12 +122,41 @@ def test_bad_targets_fail_cleanly(tmp_path):
         (["bird", "--lamp-distance", "3"], "--lamp-distance works with one target"),
         (["--seed", "-1"], "--seed must be a whole number from 0 to 4294967295, got -1"),
         (["--seed", str(2**40)], "--seed must be a whole number"),
+        (["--hand-shape", "weight=2"], "--hand-shape: Anny shape parameter weight must lie in [0, 1]"),
+        (["--hand-shape", "wrist=0.3"], "--hand-shape: unknown Anny shape parameter 'wrist'"),
+        (["--hand-shape", "0.5,1"], "--hand-shape: give Anny phenotype values as name=value"),
+        (["--hand-shape", "weight=heavy"], "--hand-shape: 'weight=heavy' does not give a number"),
     ],
 )
 def test_bad_options_fail_cleanly(tmp_path, args, message):
     res = _run(["fit", "dog"] + args + ["--out", str(tmp_path / "o")])
     assert res.returncode == 2 and message in res.stderr and res.stderr.count("\n") == 1, res.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_a_mano_fit_with_the_users_hand_shape_writes_that_hand_and_renders_back(tmp_path):
+    from handshadow.hands import load_rig
+    from handshadow.hands.rig import hand_length_m
+    from tests.hands.fake_mano import write_synthetic_mano
+
+    mano = tmp_path / "mano"
+    mano.mkdir()
+    for side in ("right", "left"):
+        write_synthetic_mano(mano / f"MANO_{side.upper()}.pkl", side)
+    out = tmp_path / "o"
+    fast = ["--quality", "fast", "--iters", "40", "--attempts", "1", "--hops", "0", "--size", "64", "--hands", "1"]
+    args = ["fit", "dog", "--hand-model", "mano", "--mano-dir", str(mano), "--hand-shape", "1.5,-0.5"]
+    res = _run([*args, *fast, "--out", str(out)])
+    assert res.returncode == 0, res.stderr
+    pose = json.loads((out / "pose.json").read_text())
+    assert [(h["model"], h["shape"]) for h in pose["hands"]] == [("mano", {"betas": [1.5, -0.5]})]
+    length = hand_length_m(load_rig("mano", pose["hands"][0]["side"], {"betas": [1.5, -0.5]}, str(mano)))
+    mean = hand_length_m(load_rig("mano", pose["hands"][0]["side"], None, str(mano)))
+    assert abs(length - mean) > 0.002  # the shape is a hand of another length, and the guide says which
+    assert f"Sized for hands {length * 100:.1f} cm long" in res.stdout
+    again = tmp_path / "again"
+    assert main(["render", str(out / "pose.json"), "--mano-dir", str(mano), "--out", str(again)]) == 0
+    assert np.array_equal(iio.imread(again / "shadow.png"), iio.imread(out / "shadow.png"))
 
 
 def test_missing_mano_files_and_unavailable_cuda(tmp_path):

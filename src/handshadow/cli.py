@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
+import math
 import signal
 import sys
 from pathlib import Path
@@ -183,12 +184,45 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
         config = dataclasses.replace(config, view_angle_deg=args.view_angle)
     if getattr(args, "view_weights", None) is not None:
         config = dataclasses.replace(config, view_weights=parse_weights(args.view_weights))
+    if getattr(args, "hand_shape", None):
+        config = dataclasses.replace(config, hand_shape=parse_hand_shape(args.hand_shape, config.hand_model))
     if config.hand_model == "mano":
         from handshadow.hands import load_rig
 
         for side in ("right", "left"):
-            load_rig("mano", side, None, config.mano_dir)
+            load_rig("mano", side, config.hand_shape or None, config.mano_dir)
     return config
+
+
+def parse_hand_shape(text: str, hand_model: str) -> dict:
+    """--hand-shape: 'name=value,...' Anny phenotypes (checked) or, for MANO, 'b1,b2,...'
+    betas, as FitConfig.hand_shape; raises HandshadowError with a one-line reason."""
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    named = [t for t in items if "=" in t]
+    try:
+        if hand_model == "anny":
+            if not items or len(named) != len(items):
+                raise ValueError("give Anny phenotype values as name=value, e.g. weight=0.8,muscle=0.7")
+            from handshadow.hands.anny import normalise_shape
+
+            shape = {k.strip(): _number(v, t) for k, v, t in ((*t.split("=", 1), t) for t in items)}
+            normalise_shape(shape)
+            return shape
+        if not items or named:
+            raise ValueError("give MANO betas as numbers, e.g. 0.5,-1.2")
+        betas = [_number(t, t) for t in items]
+        if len(betas) > 10 or not all(math.isfinite(b) for b in betas):
+            raise ValueError(f"give up to 10 finite MANO betas, got {text!r}")
+        return {"betas": betas}
+    except ValueError as exc:
+        raise HandshadowError(f"--hand-shape: {exc}") from None
+
+
+def _number(text: str, item: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(f"{item!r} does not give a number") from None
 
 
 def cmd_interpolate(args: argparse.Namespace) -> int:
@@ -254,6 +288,14 @@ def _add_fit_options(
     )
     p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")
+    p.add_argument(
+        "--hand-shape",
+        metavar="SHAPE",
+        help="your hands' build, for a pose your own hands make: Anny phenotype values from 0 to 1,"
+        " e.g. weight=0.8,muscle=0.7 (gender, age, muscle, weight, height, proportions; 0.5 each"
+        " by default; a new one takes about a minute to build, once), or with --hand-model mano"
+        " up to 10 betas, e.g. 0.5,-1.2; the guide says how long the hands are",
+    )
     p.add_argument("--limits", default="anatomical", choices=["anatomical", "paper"], help="joint-limit preset")
     p.add_argument("--light", default="point", choices=["point", "directional"])
     p.add_argument(

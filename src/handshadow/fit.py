@@ -147,7 +147,10 @@ class FitConfig:
     fine stages again from jittered copies (search.hops; None: HOPS of the quality, 0: none).
     skip_attempts: the first attempts not run, their library and atlas starts left out as if
     they had been searched (a benchmark measures a further attempt on an earlier run's
-    failures alone: attempts are deterministic, and a later one only adds to the earlier)."""
+    failures alone: attempts are deterministic, and a later one only adds to the earlier).
+    hand_shape: the hands' shape, the person's own (Anny: phenotype values in [0, 1] by name,
+    hands.anny.PHENOTYPES; MANO: {"betas": [...]}; empty: the model's default hand); pose.json
+    records it with each hand. The search's starts are the default hand's poses."""
 
     hands: str = "auto"
     size: int = 256
@@ -170,6 +173,7 @@ class FitConfig:
     lamp_to_wall_m: float | None = None
     hops: int | None = None
     skip_attempts: int = 0
+    hand_shape: dict = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass
@@ -675,7 +679,7 @@ def _result(targets, scenes, chosen: HandCountFit, poses: PoseBatch, config, ste
     hands = [
         h
         for side, batch in zip(chosen.sides, poses.hands)
-        for h in batch.to_hand_poses(side, config.hand_model, shape={})
+        for h in batch.to_hand_poses(side, config.hand_model, shape=dict(config.hand_shape))
     ]
     posed = PosedScene(tuple(hands), scenes[0], config.forearm, more_views=tuple(scenes[1:]))
     posed = parse_pose(posed.to_json())  # the file's rounding
@@ -822,7 +826,15 @@ def make_problem(
     dtype = torch.float32
     device = resolve_device(config.device)
     models = [
-        load_hand(config.hand_model, s, mano_dir=config.mano_dir, forearm=config.forearm, dtype=dtype, device=device)
+        load_hand(
+            config.hand_model,
+            s,
+            config.hand_shape or None,
+            config.mano_dir,
+            forearm=config.forearm,
+            dtype=dtype,
+            device=device,
+        )
         for s in sides
     ]
     limits = [JointLimits.preset(config.limits, s, dtype=dtype, device=device) for s in sides]
