@@ -1,10 +1,12 @@
 """Recovery benchmark: shadows that hands made, fitted back. It measures the search alone:
 every target is the exact shadow of a random, anatomically valid, performable pose of two
 hands (or of one with --hands 1; with forearms, or without with --no-forearm) at a random
-place between lamp and wall.
+place between lamp and wall. With --target-shape the hands that cast the targets are of another
+build (Anny phenotypes), each wrist moved along the light by the hand's size as the guide says,
+and the fit keeps the default hand: shadows that another person's hands made.
 
     python bench/recover.py [--n 40] [--seed 2026] [--hands 2] [--no-forearm] [--quality default]
-                            [--out out/recover] [--part K/N]
+                            [--out out/recover] [--part K/N] [--target-shape weight=0.8,muscle=0.8]
 
 --part K/N fits only the targets k with k % N == K (all are still drawn, so each keeps its pose):
 N processes with K = 0 .. N-1, e.g. on one GPU, share the work; each writes rows-K-of-N.json.
@@ -23,6 +25,7 @@ SUMMARY n=<n> success=<share> performable_success=<share> median_iou=<x> median_
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import statistics
 import time
@@ -32,8 +35,11 @@ import imageio.v3 as iio
 import numpy as np
 import torch
 
+from handshadow.cli import parse_hand_shape
+from handshadow.errors import HandshadowError
 from handshadow.export.images import mask_image
 from handshadow.fit import FitConfig, fit_frame
+from handshadow.hands import load_rig
 from handshadow.hands.limits import joint_limits_deg, wrist_limits_deg
 from handshadow.hands.penetration import penetration
 from handshadow.hands.posed import cast_shadow
@@ -84,10 +90,12 @@ def _turn_z_to(axis: np.ndarray) -> np.ndarray:
 
 
 def random_target(
-    rng: np.random.Generator, forearm: bool, tries: int = 200, n_hands: int = 2
+    rng: np.random.Generator, forearm: bool, tries: int = 200, n_hands: int = 2, shape: dict | None = None
 ) -> tuple[PosedScene, np.ndarray]:
     """A performable pose of ``n_hands`` hands (2: right and left; 1: either) whose shadow lies
-    well inside the frame, and the shadow."""
+    well inside the frame, and the shadow. ``shape``: the hands' build (Anny phenotypes; None:
+    the default hand); a hand k times the default's length (HandRig.size) stands k times as far
+    from the lamp, so the draws, and the shadows' sizes, are those of the default hand."""
     scene = Scene.default(SIZE, SIZE, lamp_to_wall_m=FIT_LAMP_TO_WALL_M)  # the lamp a default fit uses
     lamp = np.asarray(scene.light.position)
     for _ in range(tries):
@@ -100,6 +108,8 @@ def random_target(
             hands = (random_hand(side, rng, middle + offset),)
         else:
             hands = (random_hand("right", rng, middle + offset), random_hand("left", rng, middle - offset))
+        if shape:
+            hands = tuple(_held_by(h, shape, lamp) for h in hands)
         posed = PosedScene(hands, scene, forearm)
         try:
             meshes, mask = cast_shadow(posed)
@@ -117,6 +127,13 @@ def random_target(
     raise RuntimeError("no performable pose found; widen the generator's ranges")
 
 
+def _held_by(hand: HandPose, shape: dict, lamp: np.ndarray) -> HandPose:
+    """The hand with another build, its wrist moved along the light by its size (the guide's
+    rule, docs/performing.md)."""
+    k = load_rig(hand.model, hand.side, shape).size
+    return dataclasses.replace(hand, shape=dict(shape), translation=lamp + k * (np.asarray(hand.translation) - lamp))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=40)
@@ -126,6 +143,11 @@ def main() -> None:
     parser.add_argument("--quality", default="default", choices=["fast", "default", "best"])
     parser.add_argument("--out", default="out/recover")
     parser.add_argument("--part", default="0/1", help="K/N: fit only targets k with k %% N == K")
+    parser.add_argument(
+        "--target-shape",
+        help="the build of the hands that cast the targets (handshadow fit --hand-shape, Anny), e.g."
+        " weight=0.8,muscle=0.8; the fit keeps the default hand",
+    )
     args = parser.parse_args()
     try:
         part, parts = (int(x) for x in args.part.split("/"))
@@ -135,16 +157,21 @@ def main() -> None:
     rows_file = "rows.json" if parts == 1 else f"rows-{part}-of-{parts}.json"
     out = Path(args.out)
     (out / "targets").mkdir(parents=True, exist_ok=True)
+    try:
+        shape = parse_hand_shape(args.target_shape, "anny") if args.target_shape else None
+    except HandshadowError as exc:
+        raise SystemExit(str(exc)) from None
     rng = np.random.default_rng(args.seed)
     forearm = not args.no_forearm
     kind = "two-hand" if args.hands == 2 else "one-hand"
-    print(f"{args.n} random {kind} poses, forearm={forearm}, seed={args.seed}, quality={args.quality}")
+    build = f", cast by hands of {args.target_shape}" if shape else ""
+    print(f"{args.n} random {kind} poses, forearm={forearm}, seed={args.seed}, quality={args.quality}{build}")
     print(
         f"{'target':10s} {'IoU':>6s} {'HD95':>6s} {'thin':>5s} {'ok':>3s} {'pen':>5s} {'hold':>4s} {'hands':>5s} {'s':>6s}"
     )
     rows = []
     for k in range(args.n):
-        truth, target = random_target(rng, forearm, n_hands=args.hands)
+        truth, target = random_target(rng, forearm, n_hands=args.hands, shape=shape)
         if k % parts != part:
             continue
         name = f"pose{k:02d}"
