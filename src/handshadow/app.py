@@ -152,6 +152,7 @@ class FitOptions:
     invert: bool = False
     view_angle: float = 90.0  # degrees between the two lamps when a second shadow is asked for
     lamp_distance: float = FIT_LAMP_TO_WALL_M  # metres from the point lamp to the wall (one shadow only)
+    hand_shape: str = ""  # the performer's build as typed (handshadow fit --hand-shape); empty: the default hand
 
 
 @dataclasses.dataclass(frozen=True)
@@ -245,7 +246,7 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
     the second lamp turned by options.view_angle degrees; the overlays show side by side."""
     import imageio.v3 as iio
 
-    from handshadow.cli import performance_lines
+    from handshadow.cli import parse_hand_shape, performance_lines
     from handshadow.examples import target_path
     from handshadow.export.images import overlay_preview
     from handshadow.fit import FitConfig
@@ -263,6 +264,11 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
         return
     target = targets[0]
     note = "".join(f"  \n**Warning:** {t.warning}" for t in targets if t.warning)
+    try:
+        shape = parse_hand_shape(options.hand_shape, "anny") if options.hand_shape.strip() else {}
+    except HandshadowError as exc:
+        yield FitUpdate(None, f"**Cannot use this hand build:** {exc}".replace("--hand-shape: ", ""))
+        return
     config = FitConfig(
         hands=options.hands,
         quality=options.quality,
@@ -272,6 +278,7 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
         device="auto",
         view_angle_deg=options.view_angle,
         lamp_to_wall_m=options.lamp_distance if len(sources) == 1 else None,  # two shadows: the default
+        hand_shape=shape,
     )
 
     def work(report, stop):
@@ -400,6 +407,7 @@ class ShadowTab:
     lamp_distance: object
     size: object
     invert: object
+    hand_shape: object
     fit: object
     cancel: object
     status: object
@@ -422,6 +430,7 @@ class ShadowTab:
             self.size,
             self.invert,
             self.view_angle,
+            self.hand_shape,
         ]
 
     def second(self) -> list:
@@ -517,6 +526,14 @@ def _fit_options(gr) -> dict:
                 elem_id="lamp-distance",
             ),
             "invert": gr.Checkbox(value=False, label="Invert: the shape is lighter than its ground", elem_id="invert"),
+            "hand_shape": gr.Textbox(
+                value="",
+                label="Your hands' build (optional)",
+                placeholder="e.g. weight=0.8,muscle=0.7",
+                info="Anny phenotype values from 0 to 1: gender, age, muscle, weight, height, proportions"
+                " (0.5 each by default); a new build takes about a minute to make, once",
+                elem_id="hand-shape",
+            ),
         }
 
 
@@ -684,7 +701,7 @@ def build_app(store: SessionStore | None = None):
         return read_for_page(chosen(source, upload, example), invert, int(size))
 
     def on_fit(source, upload, drawing, example, second_source, second_upload, second_example, hands, quality,
-               limits, light, lamp_distance, size, invert, view_angle, request: gr.Request,
+               limits, light, lamp_distance, size, invert, view_angle, hand_shape, request: gr.Request,
                progress=gr.Progress()):  # noqa: B008  # fmt: skip
         session = session_of(request)
         options = FitOptions(
@@ -696,6 +713,7 @@ def build_app(store: SessionStore | None = None):
             size=int(size),
             invert=bool(invert),
             view_angle=float(view_angle),
+            hand_shape=str(hand_shape or ""),
         )
         try:
             target = target_source(source, upload, drawing, example, session.new_job("input"))

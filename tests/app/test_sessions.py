@@ -159,3 +159,18 @@ def test_a_second_shadow_fits_one_pose_to_two_views():
         assert "View 1" in last.status  # how each shadow came out, and what it misses
     finally:
         store.close()
+
+
+def test_a_bad_hand_build_is_said_in_words_and_nothing_is_fitted():
+    from handshadow.app import FitOptions, fit_steps
+
+    store = SessionStore()
+    try:
+        session = store.get("artist")
+        for typed, words in (("weight=2", "must lie in [0, 1]"), ("heavy", "name=value")):
+            updates = list(fit_steps(session, "rabbit", FitOptions(quality="fast", size=64, hand_shape=typed)))
+            assert len(updates) == 1 and updates[0].finished is None
+            assert updates[0].status.startswith("**Cannot use this hand build:**") and words in updates[0].status
+            assert "--hand-shape" not in updates[0].status
+    finally:
+        store.close()
