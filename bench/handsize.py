@@ -22,9 +22,8 @@ import dataclasses
 import statistics
 from pathlib import Path
 
-import numpy as np
-
 from handshadow.errors import HandshadowError
+from handshadow.guide import held_by
 from handshadow.hands import load_rig
 from handshadow.hands.posed import cast_shadow
 from handshadow.metrics import iou, score
@@ -43,16 +42,9 @@ PEOPLE = {
 }
 
 
-def held_by(posed, shape: dict, move: bool):
-    """The pose file's hands with another phenotype; with ``move``, each wrist k times as far
-    from the lamp (k: the hand's size against the default's, HandRig.size)."""
-    lamp = np.asarray(posed.scene.light.position, float)
-    hands = []
-    for h in posed.hands:
-        k = load_rig(h.model, h.side, shape).size
-        t = lamp + k * (np.asarray(h.translation, float) - lamp) if move else np.asarray(h.translation, float)
-        hands.append(dataclasses.replace(h, shape=shape, translation=t))
-    return dataclasses.replace(posed, hands=tuple(hands))
+def as_built(posed, shape: dict):
+    """The pose file's hands with another build, each wrist where the fit put it."""
+    return dataclasses.replace(posed, hands=tuple(dataclasses.replace(h, shape=dict(shape)) for h in posed.hands))
 
 
 def main() -> None:
@@ -91,8 +83,9 @@ def main() -> None:
             k = load_rig(posed.hands[0].model, posed.hands[0].side, shape).size
             row = dict(k=k, fit=fit_ok)
             for label, move in (("as_is", False), ("moved", True)):
+                held = held_by(posed, shape) if move else as_built(posed, shape)
                 try:
-                    mask = cast_shadow(held_by(posed, shape, move))[1] > 0.5
+                    mask = cast_shadow(held)[1] > 0.5
                 except HandshadowError:  # the moved hands reach the wall or the lamp
                     row[label], row[f"{label}_ok"] = 0.0, False
                     continue

@@ -25,7 +25,6 @@ SUMMARY n=<n> success=<share> performable_success=<share> median_iou=<x> median_
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import statistics
 import time
@@ -39,7 +38,7 @@ from handshadow.cli import parse_hand_shape
 from handshadow.errors import HandshadowError
 from handshadow.export.images import mask_image
 from handshadow.fit import FitConfig, fit_frame
-from handshadow.hands import load_rig
+from handshadow.guide import held_by
 from handshadow.hands.limits import joint_limits_deg, wrist_limits_deg
 from handshadow.hands.penetration import penetration
 from handshadow.hands.posed import cast_shadow
@@ -108,9 +107,9 @@ def random_target(
             hands = (random_hand(side, rng, middle + offset),)
         else:
             hands = (random_hand("right", rng, middle + offset), random_hand("left", rng, middle - offset))
-        if shape:
-            hands = tuple(_held_by(h, shape, lamp) for h in hands)
         posed = PosedScene(hands, scene, forearm)
+        if shape:  # another build, held as the guide says
+            posed = held_by(posed, shape)
         try:
             meshes, mask = cast_shadow(posed)
         except Exception:  # through the wall or the lamp: draw again
@@ -125,13 +124,6 @@ def random_target(
             continue
         return posed, shadow
     raise RuntimeError("no performable pose found; widen the generator's ranges")
-
-
-def _held_by(hand: HandPose, shape: dict, lamp: np.ndarray) -> HandPose:
-    """The hand with another build, its wrist moved along the light by its size (the guide's
-    rule, docs/performing.md)."""
-    k = load_rig(hand.model, hand.side, shape).size
-    return dataclasses.replace(hand, shape=dict(shape), translation=lamp + k * (np.asarray(hand.translation) - lamp))
 
 
 def main() -> None:

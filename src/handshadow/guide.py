@@ -5,6 +5,7 @@ per view how well its shadow came out and which parts of its target are missing.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import textwrap
 from collections.abc import Sequence
@@ -13,7 +14,7 @@ import numpy as np
 
 from handshadow.hands.rig import FINGERS
 from handshadow.metrics import SUCCESS_HD95, SUCCESS_IOU, SUCCESS_THIN, FitScore, Part
-from handshadow.poses import HandPose
+from handshadow.poses import HandPose, PosedScene
 from handshadow.scene import Scene
 
 _DIRS = {
@@ -113,6 +114,21 @@ def size_line(hands: Sequence[HandPose], scene: Scene, hand_length_m: float, vie
         f" the lamp or toward it by the same share: a hand 10 % longer, its wrist 10 % farther from"
         f" the lamp (here about {0.1 * reach * 100:.0f} cm)."
     )
+
+
+def held_by(posed: PosedScene, shape: dict, mano_dir: str | None = None) -> PosedScene:
+    """The pose held as :func:`size_line` says by hands of another build ``shape`` (as
+    HandPose.shape): each hand of that build, k times the length of the hand it replaces
+    (HandRig.size), its wrist k times as far from view 0's point lamp along the light."""
+    from handshadow.hands import load_rig
+
+    lamp = np.asarray(posed.scene.light.position, float)
+    hands = []
+    for h in posed.hands:
+        k = load_rig(h.model, h.side, shape, mano_dir).size / load_rig(h.model, h.side, h.shape, mano_dir).size
+        t = lamp + k * (np.asarray(h.translation, float) - lamp)
+        hands.append(dataclasses.replace(h, shape=dict(shape), translation=t))
+    return dataclasses.replace(posed, hands=tuple(hands))
 
 
 def wrapped(lines: Sequence[str], width_px: int, font) -> list[str]:

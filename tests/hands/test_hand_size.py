@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from handshadow.guide import size_line
+from handshadow.guide import held_by, size_line
 from handshadow.hands import load_rig
 from handshadow.hands.forearm import FOREARM_LENGTH_M, forearm_axis, forearm_length_m, sized_like
 from handshadow.hands.model import HandModel
@@ -15,7 +15,7 @@ from handshadow.hands.posed import PosedMesh, mesh_shadow
 from handshadow.hands.proxies import hand_spheres
 from handshadow.hands.rig import hand_length_m
 from handshadow.metrics import iou
-from handshadow.poses import HandPose
+from handshadow.poses import HandPose, PosedScene
 from handshadow.scene import FIT_LAMP_TO_WALL_M, Scene
 from tests.conftest import random_pose, random_rotation
 
@@ -100,3 +100,10 @@ def test_a_mano_shape_is_sized_against_the_mean_hand(tmp_path):
     assert shaped.size == pytest.approx(hand_length_m(shaped) / hand_length_m(mean))
     assert shaped.size != pytest.approx(1.0, abs=1e-3)
     np.testing.assert_allclose(forearm_axis(shaped)[1], forearm_axis(mean)[1])
+    # The guide's move for that build: the same pose, the wrist k times as far from the lamp.
+    scene = Scene.default(64, 64)
+    lamp = np.asarray(scene.light.position)
+    hand = HandPose("right", "mano", {}, np.zeros((15, 3)), np.eye(3), lamp + np.array([0.05, 0.0, -1.0]))
+    held = held_by(PosedScene((hand,), scene), {"betas": [2.0, -1.0]}, str(tmp_path)).hands[0]
+    assert held.shape == {"betas": [2.0, -1.0]}
+    np.testing.assert_allclose(held.translation, lamp + shaped.size * (hand.translation - lamp))
