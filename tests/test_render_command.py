@@ -162,3 +162,35 @@ def test_missing_pose_file_and_missing_mano_files(tmp_path):
 def test_non_empty_output_needs_force(rendered):
     res = subprocess.run(PY + ["render", "two-hands", "--out", str(rendered)], capture_output=True, text=True)
     assert res.returncode == 2 and "--force" in res.stderr
+
+
+def test_render_holds_a_pose_with_hands_of_another_build_as_the_guide_says(tmp_path):
+    from handshadow.hands import load_rig
+    from tests.hands.fake_mano import write_synthetic_mano
+
+    for side in ("right", "left"):
+        write_synthetic_mano(tmp_path / f"MANO_{side.upper()}.pkl", side)
+    pose = {"hands": [{"side": "right", "model": "mano", "translation": [0.0, 0.0, 1.0]}]}
+    (tmp_path / "m.json").write_text(json.dumps(pose))
+    out = tmp_path / "o"
+    args = ["render", str(tmp_path / "m.json"), "--mano-dir", str(tmp_path), "--hand-shape", "1.5,-0.5"]
+    assert main([*args, "--out", str(out)]) == 0
+    written = json.loads((out / "pose.json").read_text())
+    hand = written["hands"][0]
+    lamp = np.asarray(written["scene"]["light"]["position"])
+    k = load_rig("mano", "right", {"betas": [1.5, -0.5]}, str(tmp_path)).size
+    assert hand["shape"] == {"betas": [1.5, -0.5]} and k != pytest.approx(1.0, abs=1e-3)
+    np.testing.assert_allclose(hand["translation"], lamp + k * (np.array([0.0, 0.0, 1.0]) - lamp), atol=1e-8)
+    # A distant light (or an Anny build for MANO hands) allows no such move: one line, nothing written.
+    directional = {**pose, "scene": {**written["scene"], "light": {"type": "directional", "direction": [0, 0, -1]}}}
+    (tmp_path / "d.json").write_text(json.dumps(directional))
+    for source, shape, words in (("d.json", "1.5", "one point lamp"), ("m.json", "weight=0.8", "MANO betas")):
+        res = subprocess.run(
+            PY
+            + ["render", str(tmp_path / source), "--mano-dir", str(tmp_path), "--hand-shape", shape]
+            + ["--out", str(tmp_path / "bad")],
+            capture_output=True,
+            text=True,
+        )
+        assert res.returncode == 2 and words in res.stderr and res.stderr.count("\n") == 1, res.stderr
+        assert not (tmp_path / "bad").exists()

@@ -29,12 +29,34 @@ def cmd_render(args: argparse.Namespace) -> int:
     from handshadow.posefile import load_pose_file
 
     posed = load_pose_file(examples.pose_path(args.pose), frame=args.frame)  # checked before the heavy imports
+    if args.hand_shape:
+        posed = _held_by(posed, args.hand_shape, args.mano_dir)
     from handshadow.pipeline import render_to_folder, view_name
 
     out = render_to_folder(posed, args.out, force=args.force, mano_dir=args.mano_dir)
     shadows = " ".join(view_name("shadow", k, len(posed.views)) for k in range(len(posed.views)))
     print(f"wrote {out}/: {shadows} scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in posed.hands))
     return 0
+
+
+def _held_by(posed, text: str, mano_dir: str | None):
+    """render --hand-shape: the pose held by hands of that build as the guide says
+    (guide.held_by); HandshadowError with a one-line reason when the file's lamps allow no such
+    move or the build is not one of its hand model's."""
+    if posed.scene.light.type != "point" or len(posed.views) > 1:
+        raise HandshadowError(
+            "--hand-shape moves the wrists along the light of one point lamp; this pose has no such lamp"
+        )
+    models = {h.model for h in posed.hands}
+    if len(models) != 1:
+        raise HandshadowError("--hand-shape needs the pose's hands to be of one hand model")
+    shape = parse_hand_shape(text, models.pop())
+    from handshadow.guide import held_by
+
+    try:
+        return held_by(posed, shape, mano_dir)
+    except ValueError as exc:
+        raise HandshadowError(f"--hand-shape: {exc}") from None
 
 
 def cmd_examples(args: argparse.Namespace) -> int:
@@ -391,6 +413,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="write into a non-empty folder")
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl / MANO_LEFT.pkl, for poses that use MANO")
     p.add_argument("--frame", type=int, default=0, help="which frame of a poses.json (from interpolate) to render")
+    p.add_argument(
+        "--hand-shape",
+        metavar="SHAPE",
+        help="hold the pose with hands of another build (as fit --hand-shape), each wrist moved along"
+        " the light by the hand's size as the guide says: the shadow your own hands cast",
+    )
     p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("fit", help="find hand poses whose shadow matches a target image (or two, from two lamps)")
