@@ -96,11 +96,8 @@ def sized_like(rig: HandRig, default: HandRig) -> HandRig:
     """``rig``, a shape of a hand model other than its default shape ``default`` (same side),
     with its size (its length against the default's, HandRig.size) and the default's forearm
     direction: a person's forearm is as long as their hand makes it and leads the same way."""
-    if len(default.wrist_loop) < 3:
-        return dataclasses.replace(rig, size=hand_length_m(rig) / hand_length_m(default))
-    return dataclasses.replace(
-        rig, size=hand_length_m(rig) / hand_length_m(default), forearm_direction=forearm_axis(default)[1]
-    )
+    direction = forearm_axis(default)[1] if len(default.wrist_loop) >= 3 else None
+    return dataclasses.replace(rig, size=hand_length_m(rig) / hand_length_m(default), forearm_direction=direction)
 
 
 def forearm_length_m(rig: HandRig) -> float:

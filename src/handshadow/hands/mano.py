@@ -222,6 +222,13 @@ def load_mano_rig(mano_dir: str | Path, side: str = "right", shape=None) -> Hand
             right = None
         data = fix_left_shapedirs(data, right)
     betas = _betas(shape, np.asarray(data["shapedirs"]).shape[-1])
+    rig = _rig(data, side, betas)
+    # Another shape is sized against the mean hand of the same file (its forearm grows with it).
+    return sized_like(rig, _rig(data, side, np.zeros_like(betas))) if betas.any() else rig
+
+
+def _rig(data: dict, side: Side, betas: np.ndarray) -> HandRig:
+    """The HandRig of a read (and, for the left hand, fixed) MANO file for the given betas."""
     arrays = mano_arrays(data, betas)
     weights = np.asarray(data["weights"], dtype=np.float64)
     n_vertices = arrays["vertices"].shape[0]
@@ -230,7 +237,7 @@ def load_mano_rig(mano_dir: str | Path, side: str = "right", shape=None) -> Hand
     cols = (MANO_JOINTS[:, None] - 1) * 9 + np.arange(9)[None]
     posedirs = posedirs[:, cols.ravel()]
     tips = fingertip_vertices(arrays["vertices"], weights, arrays["joints"], MANO_JOINTS)
-    rig = canonicalise(
+    return canonicalise(
         side,
         "mano",
         vertices=arrays["vertices"],
@@ -243,9 +250,6 @@ def load_mano_rig(mano_dir: str | Path, side: str = "right", shape=None) -> Hand
         tip_vertices=tips,
         posedirs=posedirs,
     )
-    if not betas.any():
-        return rig
-    return sized_like(rig, load_mano_rig(mano_dir, side))
 
 
 def mano_hands_mean(mano_dir: str | Path, side: str) -> np.ndarray:
