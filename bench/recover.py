@@ -14,10 +14,12 @@ N processes with K = 0 .. N-1, e.g. on one GPU, share the work; each writes rows
 The poses come from their own generator (uniform joint angles within the limits, any
 orientation whose forearm leads back toward the lamp, hands within a person's reach), never
 from the search's starts. A pose is kept only if it is performable (no vertex more than 3 mm
-inside other flesh, docs/performing.md) and its shadow lies well inside the frame. Each target
+inside other flesh, and arms a person can hold: each forearm leads back toward the performer,
+docs/performing.md) and its shadow lies well inside the frame. Each target
 is fitted with the defaults (FitConfig(), hands auto: with --hands 1 the fit must find that one
 hand does) and judged by the success test. With --hands 1 each target's hand is the right or
-the left one at random; the two-hand targets are those of earlier runs, draw for draw.
+the left one at random. Runs before 2026-12-06's stop 54 also kept poses with a forearm
+leading toward the wall (13 of the 40 two-hand targets with forearms); their targets differ.
 Prints one row per target and
 SUMMARY n=<n> success=<share> performable_success=<share> median_iou=<x> median_s=<x>
 """
@@ -41,7 +43,7 @@ from handshadow.fit import FitConfig, fit_frame
 from handshadow.guide import held_by
 from handshadow.hands.limits import joint_limits_deg, wrist_limits_deg
 from handshadow.hands.penetration import penetration
-from handshadow.hands.posed import cast_shadow
+from handshadow.hands.posed import arm_check, cast_shadow
 from handshadow.poses import HandPose, PosedScene
 from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, Scene
 
@@ -92,7 +94,10 @@ def random_target(
     rng: np.random.Generator, forearm: bool, tries: int = 200, n_hands: int = 2, shape: dict | None = None
 ) -> tuple[PosedScene, np.ndarray]:
     """A performable pose of ``n_hands`` hands (2: right and left; 1: either) whose shadow lies
-    well inside the frame, and the shadow. ``shape``: the hands' build (Anny phenotypes; None:
+    well inside the frame, and the shadow. Performable: no vertex more than 3 mm inside other
+    flesh, and arms one person can hold by the rules every fit keeps (hands.arms: each forearm
+    leads back toward the performer, the elbows within one person's span); the cone the
+    forearm is drawn in, tilted by the hand's own turn and the wrist's bend, does not ensure it. ``shape``: the hands' build (Anny phenotypes; None:
     the default hand); a hand k times the default's length (HandRig.size) stands k times as far
     from the lamp, so the draws, and the shadows' sizes, are those of the default hand."""
     scene = Scene.default(SIZE, SIZE, lamp_to_wall_m=FIT_LAMP_TO_WALL_M)  # the lamp a default fit uses
@@ -121,6 +126,8 @@ def random_target(
         if hands_xy.min() < EDGE_PX or hands_xy.max() > SIZE - EDGE_PX:
             continue
         if not penetration([m.vertices for m in meshes], [m.faces for m in meshes]).performable():
+            continue
+        if not arm_check(posed).holdable():  # each forearm leads back toward its performer, as a fit's must
             continue
         return posed, shadow
     raise RuntimeError("no performable pose found; widen the generator's ranges")

@@ -62,3 +62,39 @@ def test_forearm_points_alone_are_where_the_posed_hand_puts_them(hands64, rng):
             posed = hand(pose, *args).forearm_points
             assert posed.shape[1] > 1, side
             assert torch.equal(hand.forearm_points(*args), posed), (side, [a is None for a in args])
+
+
+def test_a_pose_files_arms_are_checked_as_the_search_checks_them():
+    # hands.posed.arm_check (the recovery bench draws its targets by it) and the search's
+    # Problem.arm_checks share the rules; a hand turned about its wrist so that its forearm
+    # points at the wall no longer leads back.
+    import dataclasses
+
+    from scipy.spatial.transform import Rotation
+
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.hands.posed import arm_check
+    from handshadow.library import library_names, load_library_pose
+    from handshadow.poses import HandPoseBatch, PoseBatch
+
+    posed = load_library_pose(next(n for n in library_names() if len(load_library_pose(n).hands) == 2))
+    sides = [h.side for h in posed.hands]
+    problem = make_problem(np.zeros((64, 64), bool), posed.scene, sides, FitConfig(hands="2", device="cpu"))
+    hand = HandPoseBatch.from_hand_poses([posed.hands[0]])
+    axis = problem.models[0].forearm_points(*hand.args()[1:])[0].double().numpy()
+    lead = axis[-1] - axis[0]  # wrist to elbow
+    wall = -np.asarray(posed.scene.wall.normal, float)
+    to_wall, _ = Rotation.align_vectors([wall], [lead])  # the forearm turned to lead toward the wall
+    turned = dataclasses.replace(
+        posed,
+        hands=(
+            dataclasses.replace(posed.hands[0], rotation=to_wall.as_matrix() @ posed.hands[0].rotation),
+            posed.hands[1],
+        ),
+    )
+    for p, back in ((posed, (True, True)), (turned, (False, True))):
+        check = arm_check(p)
+        searched = problem.arm_checks(PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in p.hands]))[0]
+        assert check.leads_back == searched.leads_back == back
+        assert check.span_m == pytest.approx(searched.span_m, abs=1e-5)
+    assert arm_check(posed).holdable() and not arm_check(turned).holdable()

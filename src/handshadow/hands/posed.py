@@ -1,6 +1,7 @@
 """A pose file's hands as meshes, and the shadow they cast: the exact geometry of a result.
 
     meshes, mask = cast_shadow(posed_scene)   # [PosedMesh] float64 metres, (H, W) float mask
+    arms = arm_check(posed_scene)             # hands.arms.ArmCheck: can a person hold them?
     meshes, masks = cast_shadows(posed_scene) # ... and one (H, W) mask per view
 
 Vertices are rounded as the OBJ files store them, so the written shadow, the meshes and any
@@ -17,6 +18,7 @@ import torch
 from handshadow.errors import HandshadowError
 from handshadow.export.meshes import round_vertices
 from handshadow.hands import load_hand
+from handshadow.hands.arms import ArmCheck, arm_checks
 from handshadow.poses import HandPoseBatch, PosedScene
 from handshadow.render import exact_shadow
 from handshadow.scene import Scene
@@ -48,6 +50,18 @@ def pose_meshes(posed: PosedScene, mano_dir: str | None = None) -> list[PosedMes
             PosedMesh(h.side, round_vertices(res.vertices[0].numpy()), res.faces.numpy(), res.keypoints[0].numpy())
         )
     return out
+
+
+def arm_check(posed: PosedScene, mano_dir: str | None = None) -> ArmCheck:
+    """The arm rules (hands.arms) for a pose file's hands in every view: whether each
+    forearm leads back toward the performer, each elbow's shadow is out of the picture, and
+    how many people the elbows' span needs."""
+    models = [
+        load_hand(h.model, h.side, h.shape, mano_dir, forearm=posed.forearm, dtype=torch.float64) for h in posed.hands
+    ]
+    hands = [HandPoseBatch.from_hand_poses([h], dtype=torch.float64) for h in posed.hands]
+    with torch.no_grad():
+        return arm_checks(models, hands, posed.views)[0]
 
 
 def check_placement(scene: Scene, meshes: list[PosedMesh]) -> None:

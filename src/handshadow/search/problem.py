@@ -17,7 +17,7 @@ import torch
 from skimage.transform import resize
 
 from handshadow import losses
-from handshadow.hands.arms import ArmCheck, check_arms
+from handshadow.hands.arms import ArmCheck, arm_checks
 from handshadow.hands.limits import JointLimits
 from handshadow.hands.model import HandModel, HandOutput
 from handshadow.hands.penetration import Penetration, hand_parts, penetration
@@ -244,29 +244,7 @@ class Problem:
         it does so from every view's wall, an elbow is out of the picture when it is out of
         every view's."""
         poses = poses.to(self.device)
-        arms = [(h, m.forearm_points(h.rotation, h.translation, h.wrist_rad)) for m, h in zip(self.models, poses.hands)]
-        arms = [(h, points) for h, points in arms if points.shape[1]]
-        if not arms:  # no forearms: nothing beyond the wrist to check
-            return [ArmCheck((), (), 0.0, 1)] * poses.batch
-        elbows = torch.stack([points[:, -1] for _, points in arms], 1)  # (B, n, 3)
-        wrists = torch.stack([h.translation for h, _ in arms], 1)
-        as_np = lambda t: t.detach().cpu().double().numpy()  # noqa: E731
-        per_view = []  # per view: elbow pixels (B, n, 2), elbow and wrist heights (B, n), all at once
-        for view in self.views:
-            xy, elbow_heights = view.scene.project(elbows)
-            _, wrist_heights = view.scene.project(wrists)
-            per_view.append((as_np(xy), as_np(elbow_heights), as_np(wrist_heights), view.scene.image))
-        elbows_np = as_np(elbows)
-        found = []
-        for k in range(poses.batch):
-            checks = [
-                check_arms(xy[k], elbows_np[k], eh[k], wh[k], image.height, image.width)
-                for xy, eh, wh, image in per_view
-            ]
-            back = tuple(all(c) for c in zip(*(x.leads_back for x in checks)))
-            out = tuple(all(c) for c in zip(*(x.elbows_out for x in checks)))
-            found.append(dataclasses.replace(checks[0], leads_back=back, elbows_out=out))
-        return found
+        return arm_checks(self.models, poses.hands, [v.scene for v in self.views])
 
     def holdable(self, poses: PoseBatch) -> list[bool]:
         """Per hypothesis, whether the performers can hold its arms (ArmCheck.holdable)."""
