@@ -194,3 +194,22 @@ def test_render_holds_a_pose_with_hands_of_another_build_as_the_guide_says(tmp_p
         )
         assert res.returncode == 2 and words in res.stderr and res.stderr.count("\n") == 1, res.stderr
         assert not (tmp_path / "bad").exists()
+
+
+def test_render_says_whether_a_person_can_hold_the_pose(tmp_path, capsys):
+    # The built-in two-hand pose can be held. Moved into each other, the hands pass through
+    # each other; a hand turned about its wrist leads its forearm toward the wall. Each is
+    # said, with how deep or which forearm, and the files are still written.
+    pose = json.loads(pose_path("two-hands").read_text())
+    assert main(["render", str(pose_path("two-hands")), "--out", str(tmp_path / "ok")]) == 0
+    assert "Can be held: yes." in capsys.readouterr().out
+    right, left = (next(h for h in pose["hands"] if h["side"] == s) for s in ("right", "left"))
+    left["translation"] = list(np.asarray(right["translation"]) + [0.02, 0.0, 0.0])
+    turn = np.diag([-1.0, 1.0, -1.0])  # half a turn about the vertical: the left forearm now leads to the wall
+    left["rotation"] = (turn @ np.asarray(left["rotation"])).tolist()
+    (tmp_path / "bad.json").write_text(json.dumps(pose))
+    assert main(["render", str(tmp_path / "bad.json"), "--out", str(tmp_path / "no")]) == 0
+    said = capsys.readouterr().out.splitlines()[-1]
+    assert said.startswith("Can be held: no, the hands pass ") and "mm into each other" in said, said
+    assert "the left forearm leads toward the wall" in said and "right forearm" not in said, said
+    assert (tmp_path / "no" / "shadow.png").exists()

@@ -78,16 +78,16 @@ def test_scene_json_holds_one_view_as_before_and_several_as_a_list():
             views_from_json(bad)
 
 
-@pytest.mark.parametrize(
-    "name, source", [("two-hands", "two-hands"), ("directional", str(BEFORE / "directional_pose.json"))]
-)
+@pytest.mark.parametrize("name, source", [("two-hands", None), ("directional", str(BEFORE / "directional_pose.json"))])
 def test_single_view_files_from_before_render_identically(tmp_path, name, source):
-    """Files written before views existed (a built-in pose, and a pose file with a directional
-    light): rendering the source and re-rendering the pose.json written then give the same
-    scene.json, pose.json and shadow.png, byte for byte."""
+    """Files written before views existed (the built-in two-hand pose of that day, and a pose
+    file with a directional light): rendering the source and re-rendering the pose.json
+    written then give the same scene.json, pose.json and shadow.png, byte for byte. (The
+    built-in two-hand pose has since moved its hands 15 mm apart, out of each other, so its
+    old files are rendered from their pose.json alone.)"""
     before = BEFORE / name
     assert isinstance(json.loads((before / "scene.json").read_text()), dict)
-    for k, pose in enumerate((source, str(before / "pose.json"))):
+    for k, pose in enumerate(p for p in (source, str(before / "pose.json")) if p is not None):
         out = tmp_path / f"again{k}"
         assert main(["render", pose, "--out", str(out)]) == 0
         for file in ("scene.json", "pose.json", "shadow.png"):

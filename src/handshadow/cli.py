@@ -33,9 +33,10 @@ def cmd_render(args: argparse.Namespace) -> int:
         posed = _held_by(posed, args.hand_shape, args.mano_dir)
     from handshadow.pipeline import render_to_folder, view_name
 
-    out = render_to_folder(posed, args.out, force=args.force, mano_dir=args.mano_dir)
+    out, holding = render_to_folder(posed, args.out, force=args.force, mano_dir=args.mano_dir)
     shadows = " ".join(view_name("shadow", k, len(posed.views)) for k in range(len(posed.views)))
     print(f"wrote {out}/: {shadows} scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in posed.hands))
+    print(holding)
     return 0
 
 

@@ -25,9 +25,18 @@ from handshadow.export.meshes import write_glb, write_obj
 from handshadow.export.pictures import performer_framing, performer_view, plan_picture, scene_picture
 from handshadow.export.plots import path_plot
 from handshadow.fit import FitConfig, FitResult, fit_frame, resolve_device, schedule, view_scenes
-from handshadow.guide import describe, guide_image, guide_views_image, lamp_lines, shortfall_line, view_lines
+from handshadow.guide import (
+    describe,
+    guide_image,
+    guide_views_image,
+    holding_line,
+    lamp_lines,
+    shortfall_line,
+    view_lines,
+)
 from handshadow.hands import load_hand
-from handshadow.hands.posed import PosedMesh, cast_shadows
+from handshadow.hands.penetration import penetration
+from handshadow.hands.posed import PosedMesh, arm_check, cast_shadows
 from handshadow.hands.rig import hand_length_m
 from handshadow.interpolate import PathReport, morph_targets, refine_path, report, straight_path
 from handshadow.poses import PoseBatch, PosedScene
@@ -249,14 +258,19 @@ def result_lines(result: FitResult) -> list[str]:
     return view_lines([v.score for v in views], [(v.missing, v.extra) for v in views], [v.weight for v in views])
 
 
-def render_to_folder(posed: PosedScene, out: str | Path, force: bool = False, mano_dir: str | None = None) -> Path:
+def render_to_folder(
+    posed: PosedScene, out: str | Path, force: bool = False, mano_dir: str | None = None
+) -> tuple[Path, str]:
     """Render a pose file into ``out``: shadow.png (shadow_K.png per view when the file has
-    several), scene.json, <side>.obj, hands.glb, scene.png."""
+    several), scene.json, <side>.obj, hands.glb, scene.png. Returns the folder and whether a
+    person can hold the pose, in a line (guide.holding_line)."""
     meshes, masks = cast_shadows(posed, mano_dir)
+    between = penetration([m.vertices for m in meshes], [m.faces for m in meshes]).between_mm
+    holding = holding_line([h.side for h in posed.hands], between, arm_check(posed, mano_dir))
     with ResultFolder(out, force) as folder:
         write_scene_files(folder, posed.views, meshes, masks)
         write_json(folder / "pose.json", posed.to_json())
-        return folder.commit()
+        return folder.commit(), holding
 
 
 def interpolate_to_folder(
