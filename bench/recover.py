@@ -19,7 +19,7 @@ docs/performing.md) and its shadow lies well inside the frame. Each target
 is fitted with the defaults (FitConfig(), hands auto: with --hands 1 the fit must find that one
 hand does) and judged by the success test. With --hands 1 each target's hand is the right or
 the left one at random. Runs before 2026-12-06's stop 54 also kept poses with a forearm
-leading toward the wall (13 of the 40 two-hand targets with forearms); their targets differ.
+leading toward the wall (12 of the 40 two-hand targets with forearms); their targets differ.
 Prints one row per target and
 SUMMARY n=<n> success=<share> performable_success=<share> median_iou=<x> median_s=<x>
 """
