@@ -161,11 +161,12 @@ class HandPoseBatch:
 @dataclasses.dataclass(frozen=True)
 class Origin:
     """Where a search start came from: a library pose (by name, maybe mirrored), a random
-    hand, an atlas entry (by number; two hands: 'first+second'), or a start the caller gave
-    (e.g. a morph's other end); ``aligned`` when it was moved onto the target by the 2D
-    alignment."""
+    hand, an atlas entry (by number; two hands: 'first+second'), a start the caller gave
+    (e.g. a morph's other end), or one hypothesis's right hand with another's left
+    (search.crossover; name: theirs joined by ' + '); ``aligned`` when it was moved onto the
+    target by the 2D alignment."""
 
-    kind: Literal["library", "random", "given", "atlas"]
+    kind: Literal["library", "random", "given", "atlas", "crossed"]
     name: str = ""
     mirrored: bool = False
     aligned: bool = False

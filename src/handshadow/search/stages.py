@@ -14,12 +14,18 @@ import torch
 from handshadow.metrics import SUCCESS_HD95, SUCCESS_IOU, iou
 from handshadow.poses import HandPoseBatch, PoseBatch, PoseParameters
 from handshadow.search.config import FAR_EVERY, GiveUp, Stage
+from handshadow.search.crossover import crossed
 from handshadow.search.finishing import pass_in_front
 from handshadow.search.loop import optimise
 from handshadow.search.objective import ExactContacts, FarOutline, view_objective
 from handshadow.search.problem import Problem
 
 log = logging.getLogger(__name__)
+
+# After every stage but the last, two-hand hypotheses are also recombined (search.crossover):
+# up to the stage's keep of pairings, one hypothesis's right hand with another's left, join
+# the ranking when they cover the target better than every hypothesis as it stands.
+CROSS = True
 
 
 @dataclasses.dataclass
@@ -114,6 +120,11 @@ def run_stages(
                 )
             finally:
                 poses = params.poses()
+            if CROSS and si < len(stages) - 1:
+                pairs = crossed(problem, poses, stage.height, stage.keep)
+                if pairs is not None:
+                    log.info("stage %d: %d pairings of one's right hand with another's left", si + 1, pairs.batch)
+                    poses = PoseBatch.cat([poses, pairs])
             keep = min(stage.keep, poses.batch)
             poses = poses.select(rank_at(problem, poses, stage.height)[:keep])
             if give_up is not None and si == give_up.after_stage and si < len(stages) - 1:
