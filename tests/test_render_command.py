@@ -213,3 +213,16 @@ def test_render_says_whether_a_person_can_hold_the_pose(tmp_path, capsys):
     assert said.startswith("Can be held: no, the hands pass ") and "mm into each other" in said, said
     assert "the left forearm leads toward the wall" in said and "right forearm" not in said, said
     assert (tmp_path / "no" / "shadow.png").exists()
+
+
+def test_the_holding_line_names_what_stops_a_pose():
+    from handshadow.guide import holding_line
+    from handshadow.hands.arms import ArmCheck
+
+    fine = ArmCheck((True, True), (True, True), 0.4, 1)
+    assert holding_line(["right", "left"], 2.9, fine) == "Can be held: yes."
+    wide = ArmCheck((True, True), (True, True), 1.3, 2)
+    assert holding_line(["right", "left"], 0.0, wide).startswith("Can be held: by two people (the elbows are 1.30 m")
+    both = holding_line(["right", "left"], 3.5, ArmCheck((True, False), (True, True), 1.3, 2))
+    assert both.startswith("Can be held: no, the hands pass 3.5 mm into each other")
+    assert "the left forearm leads toward the wall" in both and "1.30 m apart" in both

@@ -137,16 +137,18 @@ def holding_line(sides: Sequence[str], between_mm: float, arms: ArmCheck) -> str
     """Whether a person can hold a pose, in a line (handshadow render says it of a pose file):
     the hands no more than TOLERANCE_MM inside each other by the exact mesh test
     (between_mm, the deepest), each forearm leading back toward the performer, and the
-    elbows within one person's span (arms, hands.arms.ArmCheck; sides in its order)."""
+    elbows within one person's span (arms, hands.arms.ArmCheck; sides in its order); a pose
+    that only needs two people's arms says so."""
     said = []
     if between_mm > TOLERANCE_MM:
         said.append(f"the hands pass {between_mm:.1f} mm into each other (skin gives about {TOLERANCE_MM:.0f} mm)")
     for side, back in zip(sides, arms.leads_back):
         if not back:
             said.append(f"the {side} forearm leads toward the wall (its elbow is nearer the wall than its wrist)")
-    if arms.performers > 1:
-        said.append(f"the elbows are {arms.span_m:.2f} m apart, more than one person's arms span: two people hold it")
-    return "Can be held: " + ("no, " + "; ".join(said) if said else "yes") + "."
+    span = f"the elbows are {arms.span_m:.2f} m apart, more than one person's arms span"
+    if said:
+        return "Can be held: no, " + "; ".join(said + [span] * (arms.performers > 1)) + "."
+    return f"Can be held: by two people ({span})." if arms.performers > 1 else "Can be held: yes."
 
 
 def wrapped(lines: Sequence[str], width_px: int, font) -> list[str]:
