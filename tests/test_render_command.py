@@ -215,6 +215,30 @@ def test_render_says_whether_a_person_can_hold_the_pose(tmp_path, capsys):
     assert (tmp_path / "no" / "shadow.png").exists()
 
 
+def test_render_says_when_a_hand_passes_into_itself_or_past_its_limits(tmp_path, capsys):
+    # The right hand of the built-in pose made a full fist, every finger bent as far as its
+    # joints allow: the fingertips sink into the palm (the model's flesh does not give), and
+    # the index finger spread 40 degrees, past every preset's limit (20), is named.
+    pose = json.loads(pose_path("two-hands").read_text())
+    right = next(h for h in pose["hands"] if h["side"] == "right")
+    for finger in range(1, 5):
+        for joint, bend in enumerate((90, 105, 80)):
+            right["pose_deg"][3 * finger + joint][2] = bend
+    (tmp_path / "fist.json").write_text(json.dumps(pose))
+    assert main(["render", str(tmp_path / "fist.json"), "--out", str(tmp_path / "fist")]) == 0
+    said = capsys.readouterr().out.splitlines()[-1]
+    assert said.startswith("Can be held: no, the right hand passes ") and "mm into itself" in said, said
+    assert "left hand" not in said and "limits" not in said, said
+    right["pose_deg"] = [[0.0, 0.0, 0.0]] * 15
+    right["pose_deg"][3] = [0.0, 40.0, 0.0]
+    (tmp_path / "spread.json").write_text(json.dumps(pose))
+    assert main(["render", str(tmp_path / "spread.json"), "--out", str(tmp_path / "spread")]) == 0
+    said = capsys.readouterr().out.splitlines()[-1]
+    assert said == "Can be held: no, the right hand bends past its joints' limits: index1 spread 40 deg (-20 to 20).", (
+        said
+    )
+
+
 def test_the_holding_line_names_what_stops_a_pose():
     from handshadow.guide import holding_line
     from handshadow.hands.arms import ArmCheck
@@ -226,3 +250,9 @@ def test_the_holding_line_names_what_stops_a_pose():
     both = holding_line(["right", "left"], 3.5, ArmCheck((True, False), (True, True), 1.3, 2))
     assert both.startswith("Can be held: no, the hands pass 3.5 mm into each other")
     assert "the left forearm leads toward the wall" in both and "1.30 m apart" in both
+    angles = [f"index{k} bend 120 deg (0 to 105)" for k in range(5)]
+    many = holding_line(["right", "left"], 0.0, fine, (0.0, 4.2), ([], angles))
+    assert many == (
+        "Can be held: no, the left hand passes 4.2 mm into itself (skin gives about 3 mm); the left hand bends past"
+        f" its joints' limits: {', '.join(angles[:3])} and 2 more."
+    ), many

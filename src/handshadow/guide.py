@@ -133,15 +133,32 @@ def held_by(posed: PosedScene, shape: dict, mano_dir: str | None = None) -> Pose
     return dataclasses.replace(posed, hands=tuple(hands))
 
 
-def holding_line(sides: Sequence[str], between_mm: float, arms: ArmCheck) -> str:
+def holding_line(
+    sides: Sequence[str],
+    between_mm: float,
+    arms: ArmCheck,
+    within_mm: Sequence[float] = (),
+    beyond: Sequence[Sequence[str]] = (),
+) -> str:
     """Whether a person can hold a pose, in a line (handshadow render says it of a pose file):
     the hands no more than TOLERANCE_MM inside each other by the exact mesh test
-    (between_mm, the deepest), each forearm leading back toward the performer, and the
-    elbows within one person's span (arms, hands.arms.ArmCheck; sides in its order); a pose
-    that only needs two people's arms says so."""
+    (between_mm, the deepest), no hand more than that inside itself, a finger in its palm or
+    another finger (within_mm, per hand; hands.penetration), every angle within the joint
+    limits (beyond, per hand the angles past them; hands.limits.beyond_limits), each forearm
+    leading back toward the performer, and the elbows within one person's span (arms,
+    hands.arms.ArmCheck). Per-hand values are in sides' order. A pose that only needs two
+    people's arms says so."""
     said = []
+    skin = f"(skin gives about {TOLERANCE_MM:.0f} mm)"
     if between_mm > TOLERANCE_MM:
-        said.append(f"the hands pass {between_mm:.1f} mm into each other (skin gives about {TOLERANCE_MM:.0f} mm)")
+        said.append(f"the hands pass {between_mm:.1f} mm into each other {skin}")
+    for side, mm in zip(sides, within_mm):
+        if mm > TOLERANCE_MM:
+            said.append(f"the {side} hand passes {mm:.1f} mm into itself {skin}")
+    for side, angles in zip(sides, beyond):
+        if angles:
+            more = f" and {len(angles) - 3} more" if len(angles) > 3 else ""
+            said.append(f"the {side} hand bends past its joints' limits: " + ", ".join(angles[:3]) + more)
     for side, back in zip(sides, arms.leads_back):
         if not back:
             said.append(f"the {side} forearm leads toward the wall (its elbow is nearer the wall than its wrist)")

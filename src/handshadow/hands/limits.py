@@ -113,3 +113,30 @@ class JointLimits:
 
     def to(self, device) -> JointLimits:
         return JointLimits(self.joints.to(device), self.wrist.to(device))
+
+
+AXES = ("twist", "spread", "bend")
+WRIST_AXES = ("flexion", "deviation")
+
+
+def beyond_limits(pose_deg: np.ndarray, wrist_deg: np.ndarray, side: str, tol_deg: float = 0.5) -> list[str]:
+    """The angles of one hand past what every preset allows, by more than ``tol_deg``, each as
+    "<joint> <axis> <angle> (<low> to <high>)", rig.JOINT_NAMES order, then the wrist's.
+
+    Args:
+        pose_deg: (15, 3) twist, spread, bend degrees.
+        wrist_deg: (2,) flexion, deviation degrees.
+        side: "right" or "left" (the paper's table differs per side).
+    """
+    from handshadow.hands.rig import JOINT_NAMES
+
+    presets = np.stack([joint_limits_deg(p, side) for p in PRESETS])  # (P, 15, 3, 2)
+    lo, hi = presets[..., 0].min(0), presets[..., 1].max(0)
+    out = []
+    for (j, a), v in np.ndenumerate(np.asarray(pose_deg, float)):
+        if v < lo[j, a] - tol_deg or v > hi[j, a] + tol_deg:
+            out.append(f"{JOINT_NAMES[j]} {AXES[a]} {v:.0f} deg ({lo[j, a]:.0f} to {hi[j, a]:.0f})")
+    for a, v in enumerate(np.asarray(wrist_deg, float)):
+        if v < WRIST_DEG[a, 0] - tol_deg or v > WRIST_DEG[a, 1] + tol_deg:
+            out.append(f"wrist {WRIST_AXES[a]} {v:.0f} deg ({WRIST_DEG[a, 0]:.0f} to {WRIST_DEG[a, 1]:.0f})")
+    return out

@@ -2,6 +2,7 @@
 
     meshes, mask = cast_shadow(posed_scene)   # [PosedMesh] float64 metres, (H, W) float mask
     arms = arm_check(posed_scene)             # hands.arms.ArmCheck: can a person hold them?
+    pen = pose_penetration(posed_scene, meshes) # hands.penetration.Penetration, between and within
     meshes, masks = cast_shadows(posed_scene) # ... and one (H, W) mask per view
 
 Vertices are rounded as the OBJ files store them, so the written shadow, the meshes and any
@@ -19,6 +20,7 @@ from handshadow.errors import HandshadowError
 from handshadow.export.meshes import round_vertices
 from handshadow.hands import load_hand
 from handshadow.hands.arms import ArmCheck, arm_checks
+from handshadow.hands.penetration import Penetration, hand_parts, penetration
 from handshadow.poses import HandPoseBatch, PosedScene
 from handshadow.render import exact_shadow
 from handshadow.scene import Scene
@@ -42,8 +44,7 @@ class PosedMesh:
 def pose_meshes(posed: PosedScene, mano_dir: str | None = None) -> list[PosedMesh]:
     """Build and pose the hands of a pose file (float64)."""
     out = []
-    for h in posed.hands:
-        model = load_hand(h.model, h.side, h.shape, mano_dir, forearm=posed.forearm, dtype=torch.float64)
+    for h, model in zip(posed.hands, hand_models(posed, mano_dir)):
         with torch.no_grad():
             res = model(*HandPoseBatch.from_hand_poses([h], dtype=torch.float64).args())
         out.append(
@@ -52,13 +53,26 @@ def pose_meshes(posed: PosedScene, mano_dir: str | None = None) -> list[PosedMes
     return out
 
 
+def hand_models(posed: PosedScene, mano_dir: str | None = None) -> list:
+    """The pose file's hands as HandModels (float64), in its order."""
+    return [
+        load_hand(h.model, h.side, h.shape, mano_dir, forearm=posed.forearm, dtype=torch.float64) for h in posed.hands
+    ]
+
+
+def pose_penetration(posed: PosedScene, meshes: list[PosedMesh], mano_dir: str | None = None) -> Penetration:
+    """The exact mesh test (hands.penetration) of a pose file's meshes (pose_meshes): how deep
+    the hands pass into each other, and a finger into its own hand (a part into another
+    part of the same hand)."""
+    parts = [hand_parts(m) for m in hand_models(posed, mano_dir)]
+    return penetration([m.vertices for m in meshes], [m.faces for m in meshes], parts)
+
+
 def arm_check(posed: PosedScene, mano_dir: str | None = None) -> ArmCheck:
     """The arm rules (hands.arms) for a pose file's hands in every view: whether each
     forearm leads back toward the performer, each elbow's shadow is out of the picture, and
     how many people the elbows' span needs."""
-    models = [
-        load_hand(h.model, h.side, h.shape, mano_dir, forearm=posed.forearm, dtype=torch.float64) for h in posed.hands
-    ]
+    models = hand_models(posed, mano_dir)
     hands = [HandPoseBatch.from_hand_poses([h], dtype=torch.float64) for h in posed.hands]
     with torch.no_grad():
         return arm_checks(models, hands, posed.views)[0]
