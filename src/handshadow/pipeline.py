@@ -36,7 +36,7 @@ from handshadow.guide import (
 )
 from handshadow.hands import load_hand
 from handshadow.hands.limits import beyond_limits
-from handshadow.hands.posed import PosedMesh, arm_check, cast_shadows, pose_penetration
+from handshadow.hands.posed import PosedMesh, arm_check, cast_shadows, hand_models, pose_penetration
 from handshadow.hands.rig import hand_length_m
 from handshadow.interpolate import PathReport, morph_targets, refine_path, report, straight_path
 from handshadow.poses import PoseBatch, PosedScene
@@ -265,10 +265,11 @@ def render_to_folder(
     several), scene.json, <side>.obj, hands.glb, scene.png. Returns the folder and whether a
     person can hold the pose, in a line (guide.holding_line)."""
     meshes, masks = cast_shadows(posed, mano_dir)
-    pen = pose_penetration(posed, meshes, mano_dir)
+    models = hand_models(posed, mano_dir)
+    pen = pose_penetration(posed, meshes, models=models)
     beyond = [beyond_limits(h.pose_deg, h.wrist_deg, h.side) for h in posed.hands]
     sides = [h.side for h in posed.hands]
-    holding = holding_line(sides, pen.between_mm, arm_check(posed, mano_dir), pen.within_mm, beyond)
+    holding = holding_line(sides, pen.between_mm, arm_check(posed, models=models), pen.within_mm, beyond)
     with ResultFolder(out, force) as folder:
         write_scene_files(folder, posed.views, meshes, masks)
         write_json(folder / "pose.json", posed.to_json())

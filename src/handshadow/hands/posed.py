@@ -60,19 +60,22 @@ def hand_models(posed: PosedScene, mano_dir: str | None = None) -> list:
     ]
 
 
-def pose_penetration(posed: PosedScene, meshes: list[PosedMesh], mano_dir: str | None = None) -> Penetration:
+def pose_penetration(
+    posed: PosedScene, meshes: list[PosedMesh], mano_dir: str | None = None, models: list | None = None
+) -> Penetration:
     """The exact mesh test (hands.penetration) of a pose file's meshes (pose_meshes): how deep
     the hands pass into each other, and a finger into its own hand (a part into another
-    part of the same hand)."""
-    parts = [hand_parts(m) for m in hand_models(posed, mano_dir)]
+    part of the same hand). models: the file's hand_models, when already built."""
+    parts = [hand_parts(m) for m in models or hand_models(posed, mano_dir)]
     return penetration([m.vertices for m in meshes], [m.faces for m in meshes], parts)
 
 
-def arm_check(posed: PosedScene, mano_dir: str | None = None) -> ArmCheck:
+def arm_check(posed: PosedScene, mano_dir: str | None = None, models: list | None = None) -> ArmCheck:
     """The arm rules (hands.arms) for a pose file's hands in every view: whether each
     forearm leads back toward the performer, each elbow's shadow is out of the picture, and
-    how many people the elbows' span needs."""
-    models = hand_models(posed, mano_dir)
+    how many people the elbows' span needs. models: the file's hand_models, when already
+    built."""
+    models = models or hand_models(posed, mano_dir)
     hands = [HandPoseBatch.from_hand_poses([h], dtype=torch.float64) for h in posed.hands]
     with torch.no_grad():
         return arm_checks(models, hands, posed.views)[0]
