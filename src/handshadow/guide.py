@@ -197,7 +197,12 @@ def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) 
     draw = ImageDraw.Draw(canvas)
     draw.rectangle([w - inset.width - 7, 5, w - 6, 6 + inset.height], outline=(120, 120, 120))
     draw.text((8, 6), "What you see from behind the lamp", fill=(40, 40, 40), font=font)
-    draw.text((w - inset.width - 6, inset.height + 10), "shadow vs target", fill=(90, 90, 90), font=font)
+    # The label sits on the performer's view under the inset: on a white band, so a hand
+    # reaching under the inset does not run through the words.
+    label, at = "shadow vs target", (w - inset.width - 6, inset.height + 10)
+    x0, y0, x1, y1 = draw.textbbox(at, label, font=font)
+    draw.rectangle([x0 - 2, y0 - 1, x1 + 2, y1 + 1], fill="white")
+    draw.text(at, label, fill=(90, 90, 90), font=font)
     y = h + 8
     for line in lines:
         draw.text((10, y), line, fill=(20, 20, 20), font=font)

@@ -26,3 +26,19 @@ def test_the_performer_view_shows_all_of_a_forearm_that_reaches_toward_the_lamp(
     assert drawn.mean() > 0.03  # and not a speck: the camera comes no farther than it must
     centre, distance = performer_framing([fist[0], arm_v], scene)
     assert distance > 0.4  # beyond the forearm's near end, 0.42 m from the centre along z
+
+
+def test_the_guide_writes_the_inset_label_on_white_over_a_hand_under_it():
+    # A performer's view dark all over (a hand reaching under the inset): the label under the
+    # inset is still drawn on white, so it reads. Before, its letters ran through the hand.
+    from handshadow.guide import guide_image
+
+    view = np.full((300, 300, 3), 120, np.uint8)
+    overlay = np.full((64, 64, 3), 200, np.uint8)
+    picture = guide_image(view, overlay, ["Left hand: fingers up."])
+    inset_w = 300 // 3
+    band = picture[inset_w + 10 : inset_w + 20, 300 - inset_w - 6 : 300 - 6]
+    assert (band == 255).all(axis=2).mean() > 0.25  # white around the letters (before: none)
+    assert (band < 150).all(axis=2).any()  # and the letters are there
+    below = picture[inset_w + 40 : inset_w + 60, 300 - inset_w - 6 : 300 - 6]
+    assert (below == 120).all()  # the view itself is left as it is below the label
