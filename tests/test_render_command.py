@@ -227,16 +227,27 @@ def test_render_says_when_a_hand_passes_into_itself_or_past_its_limits(tmp_path,
     (tmp_path / "fist.json").write_text(json.dumps(pose))
     assert main(["render", str(tmp_path / "fist.json"), "--out", str(tmp_path / "fist")]) == 0
     said = capsys.readouterr().out.splitlines()[-1]
-    assert said.startswith("Can be held: no, the right hand passes ") and "mm into itself" in said, said
+    assert said.startswith("Can be held: no, the right hand's fingers pass ") and "mm into its palm" in said, said
     assert "left hand" not in said and "limits" not in said, said
     right["pose_deg"] = [[0.0, 0.0, 0.0]] * 15
     right["pose_deg"][3] = [0.0, 40.0, 0.0]
     (tmp_path / "spread.json").write_text(json.dumps(pose))
     assert main(["render", str(tmp_path / "spread.json"), "--out", str(tmp_path / "spread")]) == 0
     said = capsys.readouterr().out.splitlines()[-1]
-    assert said == "Can be held: no, the right hand bends past its joints' limits: index1 spread 40 deg (-20 to 20).", (
-        said
-    )
+    assert said == (
+        "Can be held: no, the right hand goes past its joints' limits: index knuckle spread 40 deg (-20 to 20)."
+    ), said
+    # Without forearms a wrist angle moves nothing, so a leftover one is not a reason.
+    pose["forearm"] = False
+    right["pose_deg"][3] = [0.0, 0.0, 0.0]
+    right["wrist_deg"] = [120.0, 0.0]
+    (tmp_path / "wrist.json").write_text(json.dumps(pose))
+    assert main(["render", str(tmp_path / "wrist.json"), "--out", str(tmp_path / "wrist")]) == 0
+    assert "limits" not in capsys.readouterr().out.splitlines()[-1]
+    pose["forearm"] = True
+    (tmp_path / "wrist.json").write_text(json.dumps(pose))
+    assert main(["render", str(tmp_path / "wrist.json"), "--out", str(tmp_path / "wrist_arm"), "--force"]) == 0
+    assert "wrist flexion 120 deg" in capsys.readouterr().out.splitlines()[-1]
 
 
 def test_the_holding_line_names_what_stops_a_pose():
@@ -250,9 +261,32 @@ def test_the_holding_line_names_what_stops_a_pose():
     both = holding_line(["right", "left"], 3.5, ArmCheck((True, False), (True, True), 1.3, 2))
     assert both.startswith("Can be held: no, the hands pass 3.5 mm into each other")
     assert "the left forearm leads toward the wall" in both and "1.30 m apart" in both
-    angles = [f"index{k} bend 120 deg (0 to 105)" for k in range(5)]
-    many = holding_line(["right", "left"], 0.0, fine, (0.0, 4.2), ([], angles))
+    angles = [f"index knuckle bend 12{k} deg (0 to 105)" for k in range(5)]
+    many = holding_line(["right", "left"], 3.5, fine, (0.0, 4.2), ([], angles))
     assert many == (
-        "Can be held: no, the left hand passes 4.2 mm into itself (skin gives about 3 mm); the left hand bends past"
-        f" its joints' limits: {', '.join(angles[:3])} and 2 more."
+        "Can be held: no, the hands pass 3.5 mm into each other; the left hand's fingers pass 4.2 mm into its"
+        " palm or each other (skin gives about 3 mm); the left hand goes past its joints' limits:"
+        f" {', '.join(angles[:3])} and 2 more."
     ), many
+
+
+def test_the_fit_command_says_which_flesh_a_pose_passes_into():
+    # The fit's own line on penetration names the hands passing into each other only when that
+    # is the deepest; a fingertip in its own palm is said as such.
+    from types import SimpleNamespace
+
+    from handshadow.cli import performance_lines
+    from handshadow.hands.arms import ArmCheck
+    from handshadow.hands.penetration import Penetration
+
+    arms = ArmCheck((True, True), (True, True), 0.4, 1)
+
+    def said(between_mm, within_mm):
+        pen = Penetration(between_mm, within_mm, None)
+        return performance_lines(SimpleNamespace(penetration=pen, arms=arms))[0]
+
+    assert said(1.0, (2.0, 0.5)) == "deepest penetration 2.0 mm (within what skin gives)"
+    assert said(5.0, (2.0, 0.5)).endswith("(the hands pass through each other: not performable)")
+    assert said(1.0, (0.0, 6.5)) == (
+        "deepest penetration 6.5 mm (fingers pass into their own palm or each other: not performable)"
+    )

@@ -107,7 +107,12 @@ def cmd_fit(args: argparse.Namespace) -> int:
 def performance_lines(result) -> list[str]:
     """What the CLI says about holding the pose: penetration, arms, performers."""
     pen, arms = result.penetration, result.arms
-    held = "within what skin gives" if pen.performable() else "the hands pass through each other: not performable"
+    if pen.performable():
+        held = "within what skin gives"
+    elif pen.between_mm >= max(pen.within_mm, default=0.0):
+        held = "the hands pass through each other: not performable"
+    else:
+        held = "fingers pass into their own palm or each other: not performable"
     lines = [f"deepest penetration {pen.deepest_mm:.1f} mm ({held})"]
     if arms.performers > 1:
         lines.append(

@@ -149,16 +149,17 @@ def holding_line(
     hands.arms.ArmCheck). Per-hand values are in sides' order. A pose that only needs two
     people's arms says so."""
     said = []
-    skin = f"(skin gives about {TOLERANCE_MM:.0f} mm)"
     if between_mm > TOLERANCE_MM:
-        said.append(f"the hands pass {between_mm:.1f} mm into each other {skin}")
+        said.append(f"the hands pass {between_mm:.1f} mm into each other")
     for side, mm in zip(sides, within_mm):
         if mm > TOLERANCE_MM:
-            said.append(f"the {side} hand passes {mm:.1f} mm into itself {skin}")
+            said.append(f"the {side} hand's fingers pass {mm:.1f} mm into its palm or each other")
+    if said:  # once, after the last depth
+        said[-1] += f" (skin gives about {TOLERANCE_MM:.0f} mm)"
     for side, angles in zip(sides, beyond):
         if angles:
             more = f" and {len(angles) - 3} more" if len(angles) > 3 else ""
-            said.append(f"the {side} hand bends past its joints' limits: " + ", ".join(angles[:3]) + more)
+            said.append(f"the {side} hand goes past its joints' limits: " + ", ".join(angles[:3]) + more)
     for side, back in zip(sides, arms.leads_back):
         if not back:
             said.append(f"the {side} forearm leads toward the wall (its elbow is nearer the wall than its wrist)")

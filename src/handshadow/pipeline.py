@@ -267,7 +267,7 @@ def render_to_folder(
     meshes, masks = cast_shadows(posed, mano_dir)
     models = hand_models(posed, mano_dir)
     pen = pose_penetration(posed, meshes, models=models)
-    beyond = [beyond_limits(h.pose_deg, h.wrist_deg, h.side) for h in posed.hands]
+    beyond = [beyond_limits(h.pose_deg, h.wrist_deg if posed.forearm else None, h.side) for h in posed.hands]
     sides = [h.side for h in posed.hands]
     holding = holding_line(sides, pen.between_mm, arm_check(posed, models=models), pen.within_mm, beyond)
     with ResultFolder(out, force) as folder:

@@ -116,27 +116,35 @@ class JointLimits:
 
 
 AXES = ("twist", "spread", "bend")
+# rig.JOINT_NAMES as a person names them: per finger from the palm outward (the thumb's base in
+# the wrist, then its knuckle and end joint; a finger's knuckle, middle and end joint).
+JOINT_WORDS = ("thumb base", "thumb knuckle", "thumb end joint") + tuple(
+    f"{finger} {joint}"
+    for finger in ("index", "middle", "ring", "little")
+    for joint in ("knuckle", "middle joint", "end joint")
+)
 WRIST_AXES = ("flexion", "deviation")
 
 
-def beyond_limits(pose_deg: np.ndarray, wrist_deg: np.ndarray, side: str, tol_deg: float = 0.5) -> list[str]:
+def beyond_limits(pose_deg: np.ndarray, wrist_deg: np.ndarray | None, side: str, tol_deg: float = 0.5) -> list[str]:
     """The angles of one hand past what every preset allows, by more than ``tol_deg``, each as
-    "<joint> <axis> <angle> (<low> to <high>)", rig.JOINT_NAMES order, then the wrist's.
+    a person reads it, "<joint> <axis> <angle> (<low> to <high>)", e.g. "index knuckle spread
+    40 deg (-20 to 20)" (rig.JOINT_NAMES order, then the wrist's; :data:`JOINT_WORDS`; positive
+    spreads and twists toward the thumb, positive bends toward the palm).
 
     Args:
         pose_deg: (15, 3) twist, spread, bend degrees.
-        wrist_deg: (2,) flexion, deviation degrees.
+        wrist_deg: (2,) flexion, deviation degrees; None for a hand without a forearm, whose
+            wrist angles move nothing.
         side: "right" or "left" (the paper's table differs per side).
     """
-    from handshadow.hands.rig import JOINT_NAMES
-
     presets = np.stack([joint_limits_deg(p, side) for p in PRESETS])  # (P, 15, 3, 2)
     lo, hi = presets[..., 0].min(0), presets[..., 1].max(0)
     out = []
     for (j, a), v in np.ndenumerate(np.asarray(pose_deg, float)):
         if v < lo[j, a] - tol_deg or v > hi[j, a] + tol_deg:
-            out.append(f"{JOINT_NAMES[j]} {AXES[a]} {v:.0f} deg ({lo[j, a]:.0f} to {hi[j, a]:.0f})")
-    for a, v in enumerate(np.asarray(wrist_deg, float)):
+            out.append(f"{JOINT_WORDS[j]} {AXES[a]} {v:.0f} deg ({lo[j, a]:.0f} to {hi[j, a]:.0f})")
+    for a, v in enumerate(np.asarray(() if wrist_deg is None else wrist_deg, float)):
         if v < WRIST_DEG[a, 0] - tol_deg or v > WRIST_DEG[a, 1] + tol_deg:
             out.append(f"wrist {WRIST_AXES[a]} {v:.0f} deg ({WRIST_DEG[a, 0]:.0f} to {WRIST_DEG[a, 1]:.0f})")
     return out
