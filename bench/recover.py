@@ -14,12 +14,14 @@ N processes with K = 0 .. N-1, e.g. on one GPU, share the work; each writes rows
 The poses come from their own generator (uniform joint angles within the limits, any
 orientation whose forearm leads back toward the lamp, hands within a person's reach), never
 from the search's starts. A pose is kept only if it is performable (no vertex more than 3 mm
-inside other flesh, and arms a person can hold: each forearm leads back toward the performer,
+inside other flesh: the other hand's, or a finger inside its own palm or another finger; and arms a person can hold: each forearm leads back toward the performer,
 docs/performing.md) and its shadow lies well inside the frame. Each target
 is fitted with the defaults (FitConfig(), hands auto: with --hands 1 the fit must find that one
 hand does) and judged by the success test. With --hands 1 each target's hand is the right or
 the left one at random. Runs before 2026-12-06's stop 54 also kept poses with a forearm
-leading toward the wall (12 of the 40 two-hand targets with forearms); their targets differ.
+leading toward the wall (12 of the 40 two-hand targets with forearms), and runs before
+2026-12-07's stop 56 poses with fingers more than 3 mm inside their own palm or each other, which
+no fit may return (27 of the 40 with forearms, 26 of the 40 without); their targets differ.
 Prints one row per target and
 SUMMARY n=<n> success=<share> performable_success=<share> median_iou=<x> median_s=<x>
 """
@@ -42,8 +44,7 @@ from handshadow.export.images import mask_image
 from handshadow.fit import FitConfig, fit_frame
 from handshadow.guide import held_by
 from handshadow.hands.limits import joint_limits_deg, wrist_limits_deg
-from handshadow.hands.penetration import penetration
-from handshadow.hands.posed import arm_check, cast_shadow
+from handshadow.hands.posed import arm_check, cast_shadow, hand_models, pose_penetration
 from handshadow.poses import HandPose, PosedScene
 from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, Scene
 
@@ -95,7 +96,7 @@ def random_target(
 ) -> tuple[PosedScene, np.ndarray]:
     """A performable pose of ``n_hands`` hands (2: right and left; 1: either) whose shadow lies
     well inside the frame, and the shadow. Performable: no vertex more than 3 mm inside other
-    flesh, and arms one person can hold by the rules every fit keeps (hands.arms: each forearm
+    flesh (the other hand's, or its own hand's: a fingertip in the palm), and arms one person can hold by the rules every fit keeps (hands.arms: each forearm
     leads back toward the performer, the elbows within one person's span); the cone the
     forearm is drawn in, tilted by the hand's own turn and the wrist's bend, does not ensure it. ``shape``: the hands' build (Anny phenotypes; None:
     the default hand); a hand k times the default's length (HandRig.size) stands k times as far
@@ -125,9 +126,12 @@ def random_target(
         hands_xy = scene.project(torch.as_tensor(np.concatenate([m.keypoints for m in meshes])))[0].numpy()
         if hands_xy.min() < EDGE_PX or hands_xy.max() > SIZE - EDGE_PX:
             continue
-        if not penetration([m.vertices for m in meshes], [m.faces for m in meshes]).performable():
+        models = hand_models(posed)
+        if not pose_penetration(posed, meshes, models=models).performable():  # between the hands and within each
             continue
-        if not arm_check(posed).holdable():  # each forearm leads back toward its performer, as a fit's must
+        if not arm_check(
+            posed, models=models
+        ).holdable():  # each forearm leads back toward its performer, as a fit's must
             continue
         return posed, shadow
     raise RuntimeError("no performable pose found; widen the generator's ranges")
