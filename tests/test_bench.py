@@ -1,4 +1,5 @@
-"""The fit bench's own options: a bad count is refused in one line before any fit starts."""
+"""The benches' own rules: a bad count is refused in one line before any fit starts, and the
+recovery bench draws only poses a fit may return."""
 
 import subprocess
 import sys
@@ -24,3 +25,23 @@ def test_the_fit_bench_refuses_a_bad_count_in_one_line(tmp_path, option, message
     )
     assert run.returncode == 2
     assert message in run.stderr and "Traceback" not in run.stderr
+
+
+def test_the_recovery_bench_draws_only_poses_a_fit_may_return():
+    # Every recovery target is a pose a fit may return: no hand into the other or into itself
+    # (a fingertip in its own palm) past 3 mm, arms one person can hold. Its generator once
+    # tested the hands against each other only, and 27 of its 40 targets sank fingers 3 to
+    # 15 mm into their own palm.
+    import runpy
+
+    from handshadow.hands.posed import arm_check, cast_shadows, pose_penetration
+
+    recover = runpy.run_path(str(BENCH.parent / "recover.py"), run_name="recover")
+    rng = np.random.default_rng(2026)
+    for _ in range(3):
+        posed, shadow = recover["random_target"](rng, forearm=True)
+        meshes, masks = cast_shadows(posed)
+        assert np.array_equal(masks[0] > 0.5, shadow)
+        pen = pose_penetration(posed, meshes)
+        assert pen.between_mm <= 3.0 and max(pen.within_mm) <= 3.0, pen
+        assert arm_check(posed).holdable()
