@@ -14,8 +14,9 @@ N processes with K = 0 .. N-1, e.g. on one GPU, share the work; each writes rows
 The poses come from their own generator (uniform joint angles within the limits, any
 orientation whose forearm leads back toward the lamp, hands within a person's reach), never
 from the search's starts. A pose is kept only if it is performable (no vertex more than 3 mm
-inside other flesh: the other hand's, or a finger inside its own palm or another finger; and arms a person can hold: each forearm leads back toward the performer,
-docs/performing.md) and its shadow lies well inside the frame. Each target
+inside other flesh: the other hand's, or a finger inside its own palm or another finger; and
+arms a person can hold: each forearm leads back toward the performer, docs/performing.md) and
+its shadow lies well inside the frame. Each target
 is fitted with the defaults (FitConfig(), hands auto: with --hands 1 the fit must find that one
 hand does) and judged by the success test. With --hands 1 each target's hand is the right or
 the left one at random. Runs before 2026-12-06's stop 54 also kept poses with a forearm
@@ -96,8 +97,8 @@ def random_target(
 ) -> tuple[PosedScene, np.ndarray]:
     """A performable pose of ``n_hands`` hands (2: right and left; 1: either) whose shadow lies
     well inside the frame, and the shadow. Performable: no vertex more than 3 mm inside other
-    flesh (the other hand's, or its own hand's: a fingertip in the palm), and arms one person can hold by the rules every fit keeps (hands.arms: each forearm
-    leads back toward the performer, the elbows within one person's span); the cone the
+    flesh (the other hand's, or its own hand's: a fingertip in the palm), and arms one person
+    can hold by the rules every fit keeps (hands.arms: each forearm leads back toward the performer, the elbows within one person's span); the cone the
     forearm is drawn in, tilted by the hand's own turn and the wrist's bend, does not ensure it. ``shape``: the hands' build (Anny phenotypes; None:
     the default hand); a hand k times the default's length (HandRig.size) stands k times as far
     from the lamp, so the draws, and the shadows' sizes, are those of the default hand."""
@@ -127,11 +128,11 @@ def random_target(
         if hands_xy.min() < EDGE_PX or hands_xy.max() > SIZE - EDGE_PX:
             continue
         models = hand_models(posed)
-        if not pose_penetration(posed, meshes, models=models).performable():  # between the hands and within each
+        # No hand into the other, or a finger into its own palm, past what skin gives; each
+        # forearm leads back toward its performer: what a fit's result must keep.
+        if not pose_penetration(posed, meshes, models=models).performable():
             continue
-        if not arm_check(
-            posed, models=models
-        ).holdable():  # each forearm leads back toward its performer, as a fit's must
+        if not arm_check(posed, models=models).holdable():
             continue
         return posed, shadow
     raise RuntimeError("no performable pose found; widen the generator's ranges")
