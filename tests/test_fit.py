@@ -126,6 +126,8 @@ def test_bad_targets_fail_cleanly(tmp_path):
         (["--hand-shape", "wrist=0.3"], "--hand-shape: unknown Anny shape parameter 'wrist'"),
         (["--hand-shape", "0.5,1"], "--hand-shape: give Anny phenotype values as name=value"),
         (["--hand-shape", "weight=heavy"], "--hand-shape: 'weight=heavy' does not give a number"),
+        (["--time-limit", "0"], "--time-limit must be a positive number of seconds, got 0"),
+        (["--time-limit", "nan"], "--time-limit must be a positive number of seconds"),
     ],
 )
 def test_bad_options_fail_cleanly(tmp_path, args, message):
@@ -157,6 +159,17 @@ def test_a_mano_fit_with_the_users_hand_shape_writes_that_hand_and_renders_back(
     again = tmp_path / "again"
     assert main(["render", str(out / "pose.json"), "--mano-dir", str(mano), "--out", str(again)]) == 0
     assert np.array_equal(iio.imread(again / "shadow.png"), iio.imread(out / "shadow.png"))
+
+
+def test_the_time_limit_ends_the_search_and_the_result_is_written(tmp_path):
+    out = tmp_path / "o"
+    res = _run(
+        ["fit", "dog", "--hands", "1", "--size", "64", "--quality", "fast", "--time-limit", "1e-6", "--out", str(out)]
+    )
+    assert res.returncode == 0, res.stderr
+    fit = json.loads((out / "pose.json").read_text())["fit"]
+    assert fit["iterations"] == 1 and not fit["interrupted"]  # the deadline is checked after each step
+    assert (out / "shadow.png").exists() and (out / "guide.png").exists()
 
 
 def test_missing_mano_files_and_unavailable_cuda(tmp_path):

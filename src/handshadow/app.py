@@ -153,6 +153,7 @@ class FitOptions:
     view_angle: float = 90.0  # degrees between the two lamps when a second shadow is asked for
     lamp_distance: float = FIT_LAMP_TO_WALL_M  # metres from the point lamp to the wall (one shadow only)
     hand_shape: str = ""  # the performer's build as typed (handshadow fit --hand-shape); empty: the default hand
+    time_limit_s: float | None = None  # the host's bound on each fit (handshadow app --time-limit); None: none
 
 
 @dataclasses.dataclass(frozen=True)
@@ -279,6 +280,7 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
         view_angle_deg=options.view_angle,
         lamp_to_wall_m=options.lamp_distance if len(sources) == 1 else None,  # two shadows: the default
         hand_shape=shape,
+        time_limit_s=options.time_limit_s,
     )
 
     def work(report, stop):
@@ -316,6 +318,7 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
         ("Cancelled: best result so far. " if result.interrupted else "")
         + str(result.score)
         + (" (a success)" if result.success else "")
+        + limit_note(result, options.time_limit_s)
         + note
         + f"  \n{printed}"
         + "\n\n"
@@ -329,6 +332,16 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
         finished["shadow"] = str(folder / "shadows.png")
         iio.imwrite(finished["shadow"], side_by_side(shadows))
     yield FitUpdate(side_by_side(overlays), status, finished)
+
+
+def limit_note(result, time_limit_s: float | None) -> str:
+    """The status's words when the host's time limit, not the search, ended a fit that failed
+    the success test ("" otherwise)."""
+    if time_limit_s is None or result.success or result.seconds < time_limit_s:
+        return ""
+    return (
+        f"  \nThis app ends each fit after {time_limit_s:g} s; `handshadow fit` on your own computer searches longer."
+    )
 
 
 def side_by_side(images: list[np.ndarray], gap: int = 8) -> np.ndarray:
@@ -361,9 +374,19 @@ def result_files(finished: dict) -> tuple[str, ...]:
     return (shadow, *(str(folder / n) for n in names), finished["zip"], str(folder / "progress.gif"))
 
 
-def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size: int, quality: str = DEFAULT_QUALITY):
+def morph_steps(
+    session: Session,
+    a: str,
+    b: str,
+    frames: int,
+    hands: str,
+    size: int,
+    quality: str = DEFAULT_QUALITY,
+    time_limit_s: float | None = None,
+):
     """A morph for the page: (video, GIF, path plot, zip, status); both ends fitted at
-    ``quality``. Errors: Nones and the message in words."""
+    ``quality``, each within ``time_limit_s`` (None: no bound). Errors: Nones and the message
+    in words."""
     from handshadow.examples import target_path
     from handshadow.fit import FitConfig
     from handshadow.pipeline import interpolate_to_folder
@@ -372,7 +395,7 @@ def morph_steps(session: Session, a: str, b: str, frames: int, hands: str, size:
     folder = session.new_job("morph")
     try:
         targets = [read_target(target_path(source), 64, 64) for source in (a, b)]
-        config = FitConfig(hands=hands, quality=quality, size=size, device="auto")
+        config = FitConfig(hands=hands, quality=quality, size=size, device="auto", time_limit_s=time_limit_s)
         result, report = interpolate_to_folder(a, b, folder / "result", config, frames=frames, show_progress=False)
     except HandshadowError as exc:
         return None, None, None, None, f"**Cannot morph:** {in_words(exc, a, b)}"
@@ -678,8 +701,9 @@ def layout(gr, example_names: list[str]) -> tuple[ShadowTab, MorphTab]:
 # -- Wiring --------------------------------------------------------------------------------
 
 
-def build_app(store: SessionStore | None = None):
-    """The Gradio Blocks of the app, and its session store."""
+def build_app(store: SessionStore | None = None, time_limit_s: float | None = None):
+    """The Gradio Blocks of the app, and its session store. ``time_limit_s`` bounds each fit
+    (FitConfig.time_limit_s; None: no bound)."""
     import gradio as gr
 
     from handshadow import examples
@@ -714,6 +738,7 @@ def build_app(store: SessionStore | None = None):
             invert=bool(invert),
             view_angle=float(view_angle),
             hand_shape=str(hand_shape or ""),
+            time_limit_s=time_limit_s,
         )
         try:
             target = target_source(source, upload, drawing, example, session.new_job("input"))
@@ -748,7 +773,7 @@ def build_app(store: SessionStore | None = None):
         except ValueError as exc:
             return None, None, None, None, f"**Nothing to morph:** {exc}"
         progress(0.05, desc="fitting both ends and the path")
-        return morph_steps(session, a, b, int(frames), hands, int(size), quality)
+        return morph_steps(session, a, b, int(frames), hands, int(size), quality, time_limit_s)
 
     with gr.Blocks(title="handshadow", analytics_enabled=False) as demo:
         shadow, morph = layout(gr, [name for name, _ in examples.list_targets()])
@@ -788,9 +813,10 @@ def build_app(store: SessionStore | None = None):
     return demo, store
 
 
-def launch(host: str = "127.0.0.1", port: int | None = None, block: bool = True):
-    """Start the app; returns (demo, url) when not blocking. Without Gradio: a one-line
-    HandshadowError that says how to install it."""
+def launch(host: str = "127.0.0.1", port: int | None = None, block: bool = True, time_limit_s: float | None = None):
+    """Start the app; returns (demo, url) when not blocking. ``time_limit_s`` bounds each
+    visitor's fit (None: no bound). Without Gradio: a one-line HandshadowError that says how
+    to install it."""
     for key, value in OFFLINE_ENV.items():
         os.environ.setdefault(key, value)
     store = SessionStore()
@@ -803,7 +829,7 @@ def launch(host: str = "127.0.0.1", port: int | None = None, block: bool = True)
         store.close()
         raise HandshadowError(INSTALL_HINT) from None
 
-    demo, _ = build_app(store)
+    demo, _ = build_app(store, time_limit_s)
     demo.queue(default_concurrency_limit=1)
     _, url, _ = demo.launch(
         server_name=host,

@@ -151,6 +151,12 @@ def check_views(args: argparse.Namespace) -> None:
                 raise HandshadowError(f"--view-weights needs {n} weights (one per target), got {args.view_weights!r}")
 
 
+def check_time_limit(seconds: float | None, option: str = "--time-limit") -> None:
+    """A time limit must be a positive, finite number of seconds (None: no limit)."""
+    if seconds is not None and not 0 < seconds < float("inf"):
+        raise HandshadowError(f"{option} must be a positive number of seconds, got {seconds:g}")
+
+
 def parse_weights(text: str) -> tuple[float, ...]:
     """'1,0.5' -> (1.0, 0.5); each weight a positive finite number."""
     try:
@@ -187,6 +193,7 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
     if args.hops is not None and not 0 <= args.hops <= 20:
         raise HandshadowError(f"--hops must be between 0 and 20, got {args.hops}")
     check_seed(args.seed, "--seed")
+    check_time_limit(args.time_limit)
     config = FitConfig(
         hands=args.hands,
         size=args.size,
@@ -202,6 +209,7 @@ def _fit_config(args: argparse.Namespace, resolve: bool = True):
         performers=args.performers,
         attempts=args.attempts,
         hops=args.hops,
+        time_limit_s=args.time_limit,
     )
     if args.lamp_distance is not None:
         if args.light != "point":
@@ -297,6 +305,13 @@ def _add_fit_options(
         " (short attempts: a rough look, three in five HSP shapes pass; a far miss ends after one,"
         " a near miss hops and tries again, up to about 3 min), default about 30 s when its first"
         " attempt passes and up to about 7 min when every attempt fails, best longer",
+    )
+    p.add_argument(
+        "--time-limit",
+        type=float,
+        metavar="SECONDS",
+        help="end each fit's search, polish and hops after about this many seconds and finish the best so far"
+        " (its separation and measuring follow; default: no limit)",
     )
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     p.add_argument("--seed", type=int, default=0)
@@ -400,9 +415,10 @@ def cmd_batch(args: argparse.Namespace) -> int:
 def cmd_app(args: argparse.Namespace) -> int:
     if args.port is not None and not 0 < args.port < 65536:
         raise HandshadowError(f"--port must be 1..65535, got {args.port}")
+    check_time_limit(args.time_limit)
     from handshadow.app import launch
 
-    launch(args.host, args.port, block=True)  # prints its address once it listens
+    launch(args.host, args.port, block=True, time_limit_s=args.time_limit)  # prints its address once it listens
     return 0
 
 
@@ -483,6 +499,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("app", help="a local web page to make hand shadows (needs the [app] extra: Gradio)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1, this computer only)")
     p.add_argument("--port", type=int, help="port (default: 7860 or the next free one)")
+    p.add_argument(
+        "--time-limit",
+        type=float,
+        metavar="SECONDS",
+        help="end each visitor's fit after about this many seconds, the best so far finished and shown"
+        " (a shared computer: one fit runs at a time; default: no limit)",
+    )
     p.set_defaults(func=cmd_app)
 
     p = sub.add_parser("examples", help="list the built-in examples")

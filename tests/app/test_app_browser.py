@@ -1,7 +1,7 @@
 """The web app in a real browser: Debian's Chromium driven by Playwright (never `playwright
 install`). One `handshadow app` on 127.0.0.1 serves every test; the browser may reach nothing
-else. Fits are kept short (quality fast, a 64-pixel frame, one hand where it does not matter):
-CI has two cores."""
+else. Fits are kept short (quality fast, a 64-pixel frame, one hand where it does not matter,
+and the app's own bound on each fit, APP_TIME_LIMIT_S): CI has two cores."""
 
 import io
 import os
@@ -33,6 +33,7 @@ FLAGS = [
     "--disable-sync",
     "--host-resolver-rules=MAP * ~NOTFOUND , EXCLUDE 127.0.0.1",
 ]
+APP_TIME_LIMIT_S = 30  # handshadow app --time-limit: a fit's search ends then, its best finished
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 RESULT_FILES = {
     "target.png",
@@ -63,7 +64,7 @@ def app_url():
     port = _free_port()
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "handshadow.cli", "app", "--port", str(port)],
+        [sys.executable, "-m", "handshadow.cli", "app", "--port", str(port), "--time-limit", str(APP_TIME_LIMIT_S)],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,

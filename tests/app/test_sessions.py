@@ -6,6 +6,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
@@ -117,6 +118,21 @@ def test_without_gradio_the_app_says_how_to_install_it():
     assert "Traceback" not in run.stderr and run.stdout == ""
 
 
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--time-limit", "-5"], "--time-limit must be a positive number of seconds"),
+        (["--port", "0"], "--port must be"),
+    ],
+)
+def test_bad_app_options_fail_cleanly_before_serving(args, message):
+    run = subprocess.run(
+        [sys.executable, "-m", "handshadow.cli", "app", *args], capture_output=True, text=True, timeout=120
+    )
+    assert run.returncode == 2 and run.stderr.startswith("handshadow: error: ") and message in run.stderr
+    assert run.stderr.count("\n") == 1 and "Running on" not in run.stdout + run.stderr
+
+
 def test_the_page_fits_as_the_command_line_does_unless_asked_otherwise():
     # fast passed the success test on 4 of 95 HSP shapes, the default on 44 (docs/measured.md): a page
     # that starts on fast shows most visitors a blob.
@@ -157,6 +173,26 @@ def test_a_second_shadow_fits_one_pose_to_two_views():
         assert np.array_equal(shadows[:, : left.shape[1]], left if left.ndim == 3 else np.stack([left] * 3, -1))
         assert np.array_equal(shadows[:, -right.shape[1] :], right if right.ndim == 3 else np.stack([right] * 3, -1))
         assert "View 1" in last.status  # how each shadow came out, and what it misses
+    finally:
+        store.close()
+
+
+def test_the_hosts_time_limit_ends_each_fit_and_the_page_says_so():
+    # handshadow app --time-limit: a shared computer bounds every visitor's fit.
+    import json
+
+    from handshadow.app import FitOptions, fit_steps
+
+    store = SessionStore()
+    try:
+        session = store.get("artist")
+        options = FitOptions(hands="1", quality="fast", size=64, time_limit_s=1e-6)
+        last = list(fit_steps(session, "rabbit", options))[-1]
+        assert last.finished is not None, last.status
+        fit = json.loads((Path(last.finished["folder"]) / "pose.json").read_text())["fit"]
+        assert fit["iterations"] == 1 and not fit["interrupted"]  # one step, then the deadline
+        assert "(a success)" not in last.status
+        assert "This app ends each fit after 1e-06 s" in last.status
     finally:
         store.close()
 
