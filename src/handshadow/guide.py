@@ -200,7 +200,8 @@ def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) 
     draw.text((8, 6), "What you see from behind the lamp", fill=(40, 40, 40), font=font)
     # The label sits on the performer's view under the inset: on a white band, so a hand
     # reaching under the inset does not run through the words.
-    label, at = "shadow vs target", (w - inset.width - 6, inset.height + 10)
+    label = "shadow vs target"
+    at = (min(w - inset.width - 6, w - 8 - draw.textlength(label, font=font)), inset.height + 10)  # on a small view too
     x0, y0, x1, y1 = draw.textbbox(at, label, font=font)
     draw.rectangle([x0 - 2, y0 - 1, x1 + 2, y1 + 1], fill="white")
     draw.text(at, label, fill=(90, 90, 90), font=font)

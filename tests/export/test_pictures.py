@@ -42,3 +42,15 @@ def test_the_guide_writes_the_inset_label_on_white_over_a_hand_under_it():
     assert (band < 150).all(axis=2).any()  # and the letters are there
     below = picture[inset_w + 40 : inset_w + 60, 300 - inset_w - 6 : 300 - 6]
     assert (below == 120).all()  # the view itself is left as it is below the label
+
+
+def test_the_inset_label_stays_whole_on_a_small_view():
+    # A 200-pixel view makes a 66-pixel inset, narrower than its label: the label moves left
+    # to stay inside the picture instead of running off its edge.
+    from handshadow.guide import guide_image
+
+    view = np.full((200, 200, 3), 120, np.uint8)
+    picture = guide_image(view, np.full((64, 64, 3), 200, np.uint8), ["Left hand: fingers up."])
+    rows = picture[200 // 3 + 8 : 200 // 3 + 24, :200]
+    assert (rows[:, -4:] == 120).all()  # the band and its letters end before the edge
+    assert (rows == 255).all(axis=2).mean(axis=0).max() > 0.5 and (rows < 100).all(axis=2).any()
