@@ -169,6 +169,7 @@ def test_the_time_limit_ends_the_search_and_the_result_is_written(tmp_path):
     assert res.returncode == 0, res.stderr
     fit = json.loads((out / "pose.json").read_text())["fit"]
     assert fit["iterations"] == 1 and not fit["interrupted"]  # the deadline is checked after each step
+    assert fit["time_limited"] and res.stdout.startswith("time limit reached; best so far: IoU")
     assert (out / "shadow.png").exists() and (out / "guide.png").exists()
 
 

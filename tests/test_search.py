@@ -162,6 +162,7 @@ def test_a_fit_whose_search_ends_in_penetration_comes_out_apart(monkeypatch):
     assert result.penetration.deepest_mm <= 3.0 and result.penetration.performable()
     assert result.posed.fit["penetration_mm"] == round(result.penetration.deepest_mm, 2)
     assert result.posed.fit["performable"] == result.performable
+    assert result.posed.fit["time_limited"] is False  # no limit given
     assert result.score == score(result.shadow, target)  # the shadow is scored as written
     assert result.score.success
 
@@ -271,7 +272,7 @@ def test_time_limit_ends_search_and_polish_without_marking_an_interruption():
     target, _ = known_target("dog", SIZE)
     result = fit_frame(target, FitConfig(hands="1", size=SIZE, quality="fast", time_limit_s=1e-6))
     assert result.steps == 1 and not result.interrupted  # the deadline is checked after each step
-    assert result.shadow.any()
+    assert result.posed.fit["time_limited"] and result.shadow.any()
 
 
 def test_progress_sees_the_loss_terms_by_name():
@@ -954,3 +955,4 @@ def test_the_time_limit_after_an_attempt_gave_up_finishes_that_attempt(monkeypat
     assert len(searches) == 1 and searches[0].gave_up
     assert result.posed.fit["attempt"] == 1 and result.posed.fit["attempts_run"] == 1
     assert not result.interrupted and result.steps == searches[0].steps and result.penetration.performable()
+    assert result.posed.fit["time_limited"]

@@ -337,7 +337,7 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
 def limit_note(result, time_limit_s: float | None) -> str:
     """The status's words when the host's time limit, not the search, ended a fit that failed
     the success test ("" otherwise)."""
-    if time_limit_s is None or result.success or result.seconds < time_limit_s:
+    if time_limit_s is None or result.success or not result.posed.fit.get("time_limited"):
         return ""
     return (
         f"  \nThis app ends each fit after {time_limit_s:g} s; `handshadow fit` on your own computer searches longer."

@@ -95,6 +95,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
     s = result.score if len(result.views) == 1 else "every view below"
     if not args.quiet:
         state = "interrupted; best so far" if result.interrupted else ("success" if result.success else "done")
+        if not (result.interrupted or result.success) and result.posed.fit.get("time_limited"):
+            state = "time limit reached; best so far"
         print(f"{state}: {s}, {result.steps} steps, {result.seconds:.0f} s")
         for line in performance_lines(result):
             print(line)

@@ -381,7 +381,7 @@ def fit_frame(
     (the best result so far, marked interrupted). The separation of overlapping hands always
     runs to its end, after a stop or a Ctrl-C too: a result must not penetrate.
     config.time_limit_s bounds the search (set-up included) and the polish of all attempts
-    (not marked interrupted)."""
+    (not marked interrupted; posed.fit["time_limited"] says whether it ended the fit)."""
     t0 = time.perf_counter()
     config = dataclasses.replace(config, device=resolve_device(config.device))
     attempts = attempts_of(config)
@@ -456,6 +456,7 @@ def fit_frame(
         iterations=steps,
         seconds=round(seconds, 2),
         interrupted=interrupted,
+        time_limited=limit is not None and seconds >= limit,  # the limit, not the search, ended it
         attempt=chosen + 1,
         attempts_run=runs,
     )

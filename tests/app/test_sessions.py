@@ -190,7 +190,7 @@ def test_the_hosts_time_limit_ends_each_fit_and_the_page_says_so():
         last = list(fit_steps(session, "rabbit", options))[-1]
         assert last.finished is not None, last.status
         fit = json.loads((Path(last.finished["folder"]) / "pose.json").read_text())["fit"]
-        assert fit["iterations"] == 1 and not fit["interrupted"]  # one step, then the deadline
+        assert fit["iterations"] == 1 and not fit["interrupted"] and fit["time_limited"]  # one step, then the deadline
         assert "(a success)" not in last.status
         assert "This app ends each fit after 1e-06 s" in last.status
     finally:
