@@ -250,6 +250,18 @@ def test_render_says_when_a_hand_passes_into_itself_or_past_its_limits(tmp_path,
     assert "wrist flexion 120 deg" in capsys.readouterr().out.splitlines()[-1]
 
 
+def test_an_angle_past_a_full_turn_is_read_as_the_joint_holds_it():
+    # A rotation turns alike every 360 degrees: a pose file's 370-degree spread is the joint at
+    # 10 (within its limits, not named), and -400 is -40 (named as such).
+    from handshadow.hands.limits import beyond_limits
+
+    pose = np.zeros((15, 3))
+    pose[3, 1] = 370.0
+    assert beyond_limits(pose, np.array([0.0, 365.0]), "right") == []
+    pose[3, 1] = -400.0
+    assert beyond_limits(pose, None, "right") == ["index knuckle spread -40 deg (-20 to 20)"]
+
+
 def test_the_holding_line_names_what_stops_a_pose():
     from handshadow.guide import holding_line
     from handshadow.hands.arms import ArmCheck

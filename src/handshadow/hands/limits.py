@@ -141,10 +141,16 @@ def beyond_limits(pose_deg: np.ndarray, wrist_deg: np.ndarray | None, side: str,
     presets = np.stack([joint_limits_deg(p, side) for p in PRESETS])  # (P, 15, 3, 2)
     lo, hi = presets[..., 0].min(0), presets[..., 1].max(0)
     out = []
-    for (j, a), v in np.ndenumerate(np.asarray(pose_deg, float)):
+    for (j, a), v in np.ndenumerate(_wrapped(pose_deg)):
         if v < lo[j, a] - tol_deg or v > hi[j, a] + tol_deg:
             out.append(f"{JOINT_WORDS[j]} {AXES[a]} {v:.0f} deg ({lo[j, a]:.0f} to {hi[j, a]:.0f})")
-    for a, v in enumerate(np.asarray(() if wrist_deg is None else wrist_deg, float)):
+    for a, v in enumerate(_wrapped(() if wrist_deg is None else wrist_deg)):
         if v < WRIST_DEG[a, 0] - tol_deg or v > WRIST_DEG[a, 1] + tol_deg:
             out.append(f"wrist {WRIST_AXES[a]} {v:.0f} deg ({WRIST_DEG[a, 0]:.0f} to {WRIST_DEG[a, 1]:.0f})")
     return out
+
+
+def _wrapped(degrees) -> np.ndarray:
+    """Angles in [-180, 180): each elementary rotation turns alike every 360 degrees, so 370
+    in a pose file is the joint at 10."""
+    return (np.asarray(degrees, float) + 180.0) % 360.0 - 180.0
