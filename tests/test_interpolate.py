@@ -145,3 +145,14 @@ def test_ctrl_c_while_refining_keeps_the_path_so_far(morph, tmp_path, monkeypatc
     poses = json.loads((out / "poses.json").read_text())
     assert poses["interrupted"] is True and len(poses["frames"]) == 6
     assert len(list((out / "frames").glob("frame_*_shadow.png"))) == 6 and (out / "animation.mp4").exists()
+
+
+def test_a_time_limit_bounds_each_end_and_the_summary_says_so(morph, tmp_path, capsys):
+    out = tmp_path / "out"
+    options = "--frames 4 --hands 1 --size 64 --quality fast --device cpu --time-limit 1e-6 --out".split()
+    code = main(["interpolate", str(morph.parent / "dog.png"), str(morph.parent / "duck.png")] + options + [str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert captured.out.strip().splitlines()[-1].endswith(" time_limited=start,end")
+    assert captured.err.count("; the time limit ended it)") == 2  # each end's fit, as it is said
+    assert json.loads((out / "poses.json").read_text())["summary"].endswith("time_limited=start,end")

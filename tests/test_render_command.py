@@ -260,6 +260,14 @@ def test_an_angle_past_a_full_turn_is_read_as_the_joint_holds_it():
     assert beyond_limits(pose, np.array([0.0, 365.0]), "right") == []
     pose[3, 1] = -400.0
     assert beyond_limits(pose, None, "right") == ["index knuckle spread -40 deg (-20 to 20)"]
+    # A pose file is read so: the guide's words and the limits see the joint as it is held.
+    from handshadow.posefile import parse_pose
+
+    data = json.loads(pose_path("two-hands").read_text())
+    data["hands"][0]["pose_deg"][4][2] = 370.0
+    data["hands"][0]["wrist_deg"] = [-350.0, 5.0]
+    read = parse_pose(data).hands[0]
+    assert read.pose_deg[4, 2] == pytest.approx(10.0) and read.wrist_deg.tolist() == pytest.approx([10.0, 5.0])
 
 
 def test_the_holding_line_names_what_stops_a_pose():

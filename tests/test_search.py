@@ -273,6 +273,8 @@ def test_time_limit_ends_search_and_polish_without_marking_an_interruption():
     result = fit_frame(target, FitConfig(hands="1", size=SIZE, quality="fast", time_limit_s=1e-6))
     assert result.steps == 1 and not result.interrupted  # the deadline is checked after each step
     assert result.posed.fit["time_limited"] and result.shadow.any()
+    roomy = FitConfig(hands="1", size=SIZE, quality="fast", iters=12, attempts=1, hops=0, time_limit_s=3600)
+    assert fit_frame(target, roomy).posed.fit["time_limited"] is False  # a limit not reached ended nothing
 
 
 def test_progress_sees_the_loss_terms_by_name():

@@ -337,7 +337,7 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
 def limit_note(result, time_limit_s: float | None) -> str:
     """The status's words when the host's time limit, not the search, ended a fit that failed
     the success test ("" otherwise)."""
-    if time_limit_s is None or result.success or not result.posed.fit.get("time_limited"):
+    if time_limit_s is None or result.success or result.interrupted or not result.posed.fit.get("time_limited"):
         return ""
     return (
         f"  \nThis app ends each fit after {time_limit_s:g} s; `handshadow fit` on your own computer searches longer."
@@ -404,7 +404,13 @@ def morph_steps(
     zip_path = shutil.make_archive(str(folder / "handshadow-morph"), "zip", result)
     files = [str(result / n) for n in ("animation.mp4", "animation.gif", "path.png")]
     warnings = [f"**Warning ({end}):** {t.warning}  \n" for end, t in zip(("first", "last"), targets) if t.warning]
-    return (*files, zip_path, "".join(warnings) + report.summary())
+    ended = [end for end, t in zip(("first", "last"), report.time_limited) if t]
+    limited = (
+        f"  \nThis app ends each fit after {time_limit_s:g} s: it cut the {' and '.join(ended)} end's short."
+        if ended
+        else ""
+    )
+    return (*files, zip_path, "".join(warnings) + report.summary() + limited)
 
 
 # -- The page ------------------------------------------------------------------------------

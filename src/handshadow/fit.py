@@ -397,6 +397,7 @@ def fit_frame(
     scenes = view_scenes(targets, config)
     limit = config.time_limit_s or None  # seconds; None or 0: no limit
     best, interrupted, runs, steps = None, False, 0, 0
+    time_limited = False  # the limit, not the search, ended a search, a polish or the attempts
     gave_up: tuple | None = None  # the best attempt that gave up so far: (index, GaveUp, its config)
     tried: dict[int, set] = {}  # per hand count, the library and atlas starts searched so far
     for k in range(skipped_attempts(config)):
@@ -404,6 +405,7 @@ def fit_frame(
     for k in range(config.skip_attempts, attempts):
         left = None if limit is None else limit - (time.perf_counter() - t0)
         if (best is not None or gave_up is not None) and left is not None and left <= 0:
+            time_limited = True
             break
         tell = None if progress is None else (lambda p, k=k: progress(dataclasses.replace(p, attempt=k)))
         attempt = dataclasses.replace(config, seed=config.seed + k)
@@ -430,6 +432,7 @@ def fit_frame(
         runs += 1
         steps += result.steps
         interrupted = interrupted or result.interrupted
+        time_limited = time_limited or result.posed.fit["time_limited"]
         if best is None or result_key(result) < result_key(best):
             best, chosen = result, k
         if best.success or interrupted or (stop is not None and stop()):
@@ -448,6 +451,7 @@ def fit_frame(
         result = _complete(
             targets, scenes, early.chosen, attempt, halt, time.perf_counter(), left, None, early.steps, interrupted
         )
+        time_limited = time_limited or result.posed.fit["time_limited"]
         if best is None or result_key(result) < result_key(best):
             best, chosen = result, k
     seconds = time.perf_counter() - t0
@@ -456,7 +460,7 @@ def fit_frame(
         iterations=steps,
         seconds=round(seconds, 2),
         interrupted=interrupted,
-        time_limited=limit is not None and seconds >= limit,  # the limit, not the search, ended it
+        time_limited=time_limited and not interrupted,
         attempt=chosen + 1,
         attempts_run=runs,
     )
@@ -556,18 +560,24 @@ def _attempt(
     if not reached:
         raise GaveUp(min(searches, key=HandCountFit.preference_key), steps)
     chosen = min(reached, key=HandCountFit.preference_key)
-    return _complete(targets, scenes, chosen, config, stop, t0, limit, progress, steps, interrupted)
+    timed_out = any(s.search.timed_out for s in searches)
+    return _complete(targets, scenes, chosen, config, stop, t0, limit, progress, steps, interrupted, timed_out)
 
 
-def _complete(targets, scenes, chosen, config, stop, t0, limit, progress, steps, interrupted) -> FitResult:
+def _complete(
+    targets, scenes, chosen, config, stop, t0, limit, progress, steps, interrupted, timed_out=False
+) -> FitResult:
     """A search's best finished (separation, polish, hops, placement) and measured: the
-    attempt's FitResult. ``t0`` and ``limit`` as the attempt's; ``steps`` its search steps."""
-    poses, finish_interrupted = _finish(chosen, config, stop, t0, limit, progress)
+    attempt's FitResult. ``t0`` and ``limit`` as the attempt's; ``steps`` its search steps;
+    ``timed_out``: the limit ended one of its searches (posed.fit["time_limited"] also counts
+    the finishing steps')."""
+    poses, finish_interrupted, finish_timed_out = _finish(chosen, config, stop, t0, limit, progress)
     interrupted = interrupted or finish_interrupted
+    timed_out = timed_out or finish_timed_out
     try:
-        return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, interrupted)
+        return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, interrupted, timed_out)
     except KeyboardInterrupt:  # Ctrl-C while the finished pose is measured: measure it, then stop
-        return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, True)
+        return _result(targets, scenes, chosen, poses, config, steps, time.perf_counter() - t0, True, timed_out)
 
 
 def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
@@ -595,9 +605,10 @@ def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
 
 def _finish(
     chosen: HandCountFit, config: FitConfig, stop, t0: float, limit: float | None, progress=None
-) -> tuple[PoseBatch, bool]:
+) -> tuple[PoseBatch, bool, bool]:
     """Separation, polish, hops, settling and placement of the chosen search's best: (poses,
-    interrupted). ``progress`` sees the hops' stages."""
+    interrupted, whether the time limit ended a finishing step). ``progress`` sees the hops'
+    stages."""
     problem, res = chosen.problem, chosen.search
     timed_out = False
 
@@ -646,7 +657,7 @@ def _finish(
         poses, interrupted = halt.poses, not timed_out
         if timed_out:
             log.info("the polish stopped at the time limit")
-    return keep_between_light_and_wall(problem, poses), interrupted
+    return keep_between_light_and_wall(problem, poses), interrupted, timed_out and not interrupted
 
 
 def _separated(chosen: HandCountFit) -> tuple[PoseBatch, bool]:
@@ -675,8 +686,11 @@ def _separated(chosen: HandCountFit) -> tuple[PoseBatch, bool]:
     return poses, interrupted
 
 
-def _result(targets, scenes, chosen: HandCountFit, poses: PoseBatch, config, steps, seconds, interrupted) -> FitResult:
-    """The FitResult of the finished poses: measured on exactly what the pose file will hold."""
+def _result(
+    targets, scenes, chosen: HandCountFit, poses: PoseBatch, config, steps, seconds, interrupted, timed_out=False
+) -> FitResult:
+    """The FitResult of the finished poses: measured on exactly what the pose file will hold.
+    ``timed_out``: the time limit ended a search or finishing step (fit["time_limited"])."""
     hands = [
         h
         for side, batch in zip(chosen.sides, poses.hands)
@@ -703,6 +717,7 @@ def _result(targets, scenes, chosen: HandCountFit, poses: PoseBatch, config, ste
         limits=config.limits,
         quality=config.quality,
         interrupted=interrupted,
+        time_limited=timed_out and not interrupted,
     )
     if len(views) > 1:
         info["view_angle_deg"] = config.view_angle_deg

@@ -201,7 +201,10 @@ def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) 
     # The label sits on the performer's view under the inset: on a white band, so a hand
     # reaching under the inset does not run through the words.
     label = "shadow vs target"
-    at = (min(w - inset.width - 6, w - 8 - draw.textlength(label, font=font)), inset.height + 10)  # on a small view too
+    at = (
+        max(8, min(w - inset.width - 6, w - 8 - draw.textlength(label, font=font))),
+        inset.height + 10,
+    )  # small views too
     x0, y0, x1, y1 = draw.textbbox(at, label, font=font)
     draw.rectangle([x0 - 2, y0 - 1, x1 + 2, y1 + 1], fill="white")
     draw.text(at, label, fill=(90, 90, 90), font=font)

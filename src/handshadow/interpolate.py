@@ -182,12 +182,15 @@ class PathReport:
     steps_deg: list[float]
     penetration_mm: list[float]
     interrupted: bool = False  # Ctrl-C during the path refinement: the path as refined so far
+    time_limited: tuple[bool, bool] = (False, False)  # the time limit ended the fit of the start, of the end
 
     def summary(self) -> str:
+        ended = ",".join(end for end, t in zip(("start", "end"), self.time_limited) if t)
         return (
             f"SUMMARY iou_start={self.iou_start:.3f} iou_end={self.iou_end:.3f} thin_start={self.thin_start:.3f} "
             f"thin_end={self.thin_end:.3f} hd95_start={self.hd95_start:.4f} hd95_end={self.hd95_end:.4f} "
             f"max_step_deg={self.max_step_deg:.2f} penetrating_frames={self.penetrating_frames}"
+            + (f" time_limited={ended}" if ended else "")
         )
 
 

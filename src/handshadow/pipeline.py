@@ -9,6 +9,7 @@ The CLI and the app call these; each writes its folder completely or not at all.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -303,11 +304,11 @@ def interpolate_to_folder(
     fit_a = fit_frame(target_a, config)
     if fit_a.interrupted:  # Ctrl-C in a fit: a morph needs both ends, so nothing is written
         raise KeyboardInterrupt
-    say(f"fitting A: {_judged(fit_a.score)}; fitting B close to A ...")
+    say(f"fitting A: {_judged(fit_a)}; fitting B close to A ...")
     fit_b = fit_frame(target_b, config, extra_starts=fit_a.poses, anchor=fit_a.poses)
     if fit_b.interrupted:
         raise KeyboardInterrupt
-    say(f"fitting B: {_judged(fit_b.score)}; refining the path (Ctrl-C keeps the path so far) ...")
+    say(f"fitting B: {_judged(fit_b)}; refining the path (Ctrl-C keeps the path so far) ...")
     problem = fit_a.problem
     path = straight_path(fit_a.poses, fit_b.poses, frames)
     interrupted = False
@@ -316,6 +317,7 @@ def interpolate_to_folder(
     except Interrupted as halt:
         path, interrupted = halt.poses, True
     rep, shadows = report(problem, path, target_a, target_b, interrupted)
+    rep = dataclasses.replace(rep, time_limited=(fit_a.posed.fit["time_limited"], fit_b.posed.fit["time_limited"]))
     poses_json = path_pose_file(path, fit_a.posed, rep)
     views = performance_views(problem, path, fit_a.posed, config.size)
     pictures = [np.concatenate([np.repeat(mask_image(m)[..., None], 3, axis=2), v], 1) for m, v in zip(shadows, views)]
@@ -353,10 +355,12 @@ def performance_views(problem, path: PoseBatch, template: PosedScene, size: int)
     ]
 
 
-def _judged(s) -> str:
-    """A fit's measures in words, and whether it passes the success test."""
+def _judged(fit: FitResult) -> str:
+    """A fit's measures in words, whether it passes the success test, and whether the time
+    limit ended it."""
+    s = fit.score
     verdict = "a success" if s.success else "short of the success test"
-    return f"{s} ({verdict})"
+    return f"{s} ({verdict}{'; the time limit ended it' if fit.posed.fit['time_limited'] else ''})"
 
 
 def path_pose_file(path: PoseBatch, template: PosedScene, rep: PathReport) -> dict:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from handshadow.errors import HandshadowError
+from handshadow.hands.limits import wrap_degrees
 from handshadow.hands.rig import JOINT_NAMES, check_side
 from handshadow.poses import FORMAT, HandPose, PosedScene
 from handshadow.scene import Scene, SceneError, views_from_json
@@ -98,14 +99,15 @@ def _parse_hand(h, where: str) -> HandPose:
     shape = h.get("shape") or {}
     if not isinstance(shape, dict):
         raise PoseFileError(f"{where}: shape must be an object")
-    pose = _array(h.get("pose_deg", np.zeros((15, 3))), (len(JOINT_NAMES), 3), f"{where}.pose_deg")
+    # A joint turns alike every 360 degrees: 370 is read as 10, as the guide and the limits see it.
+    pose = wrap_degrees(_array(h.get("pose_deg", np.zeros((15, 3))), (len(JOINT_NAMES), 3), f"{where}.pose_deg"))
     rotation = _array(h.get("rotation", np.eye(3)), (3, 3), f"{where}.rotation")
     u, sv, vt = np.linalg.svd(rotation)
     if np.abs(sv - 1).max() > 1e-3 or np.linalg.det(rotation) < 0:
         raise PoseFileError(f"{where}.rotation must be a rotation matrix (orthonormal, det +1)")
     rotation = u @ vt
     translation = _array(h.get("translation"), (3,), f"{where}.translation")
-    wrist = _array(h.get("wrist_deg", np.zeros(2)), (2,), f"{where}.wrist_deg")
+    wrist = wrap_degrees(_array(h.get("wrist_deg", np.zeros(2)), (2,), f"{where}.wrist_deg"))
     return HandPose(side, model, shape, pose, rotation, translation, wrist)
 
 

@@ -133,6 +133,16 @@ def test_bad_app_options_fail_cleanly_before_serving(args, message):
     assert run.stderr.count("\n") == 1 and "Running on" not in run.stdout + run.stderr
 
 
+def test_the_app_command_hands_its_time_limit_to_the_page(monkeypatch):
+    import handshadow.app
+    from handshadow.cli import main
+
+    seen = {}
+    monkeypatch.setattr(handshadow.app, "launch", lambda host, port, block, time_limit_s: seen.update(t=time_limit_s))
+    assert main(["app", "--time-limit", "45"]) == 0 and seen == {"t": 45.0}
+    assert main(["app"]) == 0 and seen == {"t": None}
+
+
 def test_the_page_fits_as_the_command_line_does_unless_asked_otherwise():
     # fast passed the success test on 4 of 95 HSP shapes, the default on 44 (docs/measured.md): a page
     # that starts on fast shows most visitors a blob.

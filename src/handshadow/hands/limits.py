@@ -141,16 +141,17 @@ def beyond_limits(pose_deg: np.ndarray, wrist_deg: np.ndarray | None, side: str,
     presets = np.stack([joint_limits_deg(p, side) for p in PRESETS])  # (P, 15, 3, 2)
     lo, hi = presets[..., 0].min(0), presets[..., 1].max(0)
     out = []
-    for (j, a), v in np.ndenumerate(_wrapped(pose_deg)):
+    for (j, a), v in np.ndenumerate(wrap_degrees(pose_deg)):
         if v < lo[j, a] - tol_deg or v > hi[j, a] + tol_deg:
             out.append(f"{JOINT_WORDS[j]} {AXES[a]} {v:.0f} deg ({lo[j, a]:.0f} to {hi[j, a]:.0f})")
-    for a, v in enumerate(_wrapped(() if wrist_deg is None else wrist_deg)):
+    for a, v in enumerate(wrap_degrees(() if wrist_deg is None else wrist_deg)):
         if v < WRIST_DEG[a, 0] - tol_deg or v > WRIST_DEG[a, 1] + tol_deg:
             out.append(f"wrist {WRIST_AXES[a]} {v:.0f} deg ({WRIST_DEG[a, 0]:.0f} to {WRIST_DEG[a, 1]:.0f})")
     return out
 
 
-def _wrapped(degrees) -> np.ndarray:
-    """Angles in [-180, 180): each elementary rotation turns alike every 360 degrees, so 370
-    in a pose file is the joint at 10."""
+def wrap_degrees(degrees) -> np.ndarray:
+    """Joint angles in [-180, 180), same shape, float64: each elementary rotation (twist,
+    spread, bend, the wrist's) turns alike every 360 degrees, so 370 in a pose file is the
+    joint at 10."""
     return (np.asarray(degrees, float) + 180.0) % 360.0 - 180.0

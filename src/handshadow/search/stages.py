@@ -55,7 +55,8 @@ class Progress:
 class SearchResult:
     """poses: the best hypothesis (batch 1); steps taken; seconds; whether Ctrl-C or ``stop``
     ended it; ranking: per surviving hypothesis its index, measures and rank key, best first;
-    gave_up: the stages stopped early with every survivor out of reach (:func:`out_of_reach`)."""
+    gave_up: the stages stopped early with every survivor out of reach (:func:`out_of_reach`);
+    timed_out: the deadline ended them."""
 
     poses: PoseBatch
     steps: int
@@ -63,6 +64,7 @@ class SearchResult:
     interrupted: bool
     ranking: list[dict]
     gave_up: bool = False
+    timed_out: bool = False
 
     @property
     def key(self) -> tuple:
@@ -85,7 +87,7 @@ def run_stages(
     every survivor is out of reach there (:func:`out_of_reach`; SearchResult.gave_up)."""
     t0 = time.perf_counter()
     total = sum(s.steps for s in stages)
-    done, interrupted, gave_up = 0, False, False
+    done, interrupted, gave_up, timed_out = 0, False, False, False
     poses = starts
     try:
         for si, stage in enumerate(stages):
@@ -138,8 +140,10 @@ def run_stages(
         interrupted = True
     except TimeoutError:
         log.info("search stopped at its time limit")
+        timed_out = True
     ranking = rank_details(problem, poses)
-    return SearchResult(poses.item(ranking[0]["index"]), done, time.perf_counter() - t0, interrupted, ranking, gave_up)
+    seconds = time.perf_counter() - t0
+    return SearchResult(poses.item(ranking[0]["index"]), done, seconds, interrupted, ranking, gave_up, timed_out)
 
 
 def out_of_reach(problem: Problem, poses: PoseBatch, give_up: GiveUp) -> bool:
