@@ -684,13 +684,16 @@ def _morph_tab(gr, example_names: list[str]) -> MorphTab:
     )
 
 
-def layout(gr, example_names: list[str]) -> tuple[ShadowTab, MorphTab]:
-    """The page's components, inside an open gr.Blocks; no behaviour."""
+def layout(gr, example_names: list[str], time_limit_s: float | None = None) -> tuple[ShadowTab, MorphTab]:
+    """The page's components, inside an open gr.Blocks; no behaviour. ``time_limit_s``: the
+    host's bound on each fit, said under the title (None: nothing said)."""
     gr.Markdown(
         "# handshadow\n"
         "Make a shadow with your hands. **1.** Choose a shape: an example, your own picture (a photo of a "
         "shadow on a wall works too), or a drawing. **2.** Press **Fit** and watch the hands find it. "
         "**3.** Turn the 3D hands around, read how to hold them, and try it with a lamp and a wall."
+        + (f" This app ends each fit after {time_limit_s:g} s." if time_limit_s else ""),
+        elem_id="intro",
     )
     with gr.Tab("Shadow"):
         with gr.Row():
@@ -782,7 +785,7 @@ def build_app(store: SessionStore | None = None, time_limit_s: float | None = No
         return morph_steps(session, a, b, int(frames), hands, int(size), quality, time_limit_s)
 
     with gr.Blocks(title="handshadow", analytics_enabled=False) as demo:
-        shadow, morph = layout(gr, [name for name, _ in examples.list_targets()])
+        shadow, morph = layout(gr, [name for name, _ in examples.list_targets()], time_limit_s)
         picked = [shadow.source, shadow.upload, shadow.example, shadow.invert, shadow.size]
         shadow.source.change(show_source, shadow.source, [shadow.example, shadow.upload, shadow.drawing], queue=False)
         shadow.second_source.change(

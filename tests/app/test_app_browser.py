@@ -200,6 +200,10 @@ def _drawn_pixels(page, selector: str, background=(237, 240, 245)) -> int:
     return int((np.abs(img - np.array(background)).sum(-1) > 40).sum())
 
 
+def test_the_page_says_the_hosts_time_limit(page):
+    assert f"This app ends each fit after {APP_TIME_LIMIT_S} s." in page.locator("#intro").inner_text()
+
+
 def test_upload_fit_and_download(page, tmp_path):
     from handshadow.examples import target_path
 

@@ -143,6 +143,22 @@ def test_the_app_command_hands_its_time_limit_to_the_page(monkeypatch):
     assert main(["app"]) == 0 and seen == {"t": None}
 
 
+def test_the_page_says_the_hosts_time_limit_only_when_there_is_one():
+    import gradio as gr
+
+    from handshadow.app import build_app
+
+    for limit, said in ((45.0, True), (None, False)):
+        store = SessionStore()
+        try:
+            demo, _ = build_app(store, limit)
+            texts = [b.value for b in demo.blocks.values() if isinstance(b, gr.Markdown)]
+            assert any("This app ends each fit after" in str(t) for t in texts) == said
+            assert any("after 45 s." in str(t) for t in texts) == said
+        finally:
+            store.close()
+
+
 def test_the_page_fits_as_the_command_line_does_unless_asked_otherwise():
     # fast passed the success test on 4 of 95 HSP shapes, the default on 44 (docs/measured.md): a page
     # that starts on fast shows most visitors a blob.
