@@ -284,3 +284,20 @@ def test_local_workers_keep_glibcs_dynamic_mmap_threshold_and_do_not_profile():
     with open_cluster(None, 1, 1, dashboard=False, quiet_logs=True) as (client, _):
         environ = client.submit(_worker_environ, pure=False).result()
     assert environ == {"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1", "profiling": False}
+
+
+def _log_from_worker(message: str) -> None:
+    import logging
+
+    logging.getLogger("distributed.worker").error(message)
+
+
+@pytest.mark.parametrize("quiet", [True, False])
+def test_quiet_workers_keep_their_errors_off_the_terminal(capfd, quiet):
+    # After a Ctrl-C a worker may log a heartbeat the scheduler no longer answers, as an ERROR
+    # with its traceback: quiet (the default), only what is critical reaches the terminal.
+    from handshadow.batch import open_cluster
+
+    with open_cluster(None, 1, 1, dashboard=False, quiet_logs=quiet) as (client, _):
+        client.run(_log_from_worker, "a worker's error, logged")
+    assert ("a worker's error, logged" in capfd.readouterr().err) is not quiet

@@ -322,7 +322,10 @@ def open_cluster(
     n, threads = local_cluster_size(workers, threads_per_worker)
     with (
         dask.config.set(worker_settings(dashboard)),
-        _local_cluster(n, threads, dashboard, level) as cluster,
+        # A worker logs each heartbeat the scheduler no longer answers as an ERROR with its
+        # traceback: after a Ctrl-C, when the scheduler goes first. Quiet, the workers log only
+        # what is critical; a task's own error reaches the batch as its result.
+        _local_cluster(n, threads, dashboard, logging.CRITICAL if quiet_logs else level) as cluster,
         Client(cluster) as client,
     ):
         link = f", dashboard {client.dashboard_link}" if dashboard else ""
