@@ -334,14 +334,17 @@ def fit_steps(session: Session, source: str | list[str], options: FitOptions) ->
     yield FitUpdate(side_by_side(overlays), status, finished)
 
 
+def host_limit(time_limit_s: float) -> str:
+    """The page's words for the host's bound on each fit (handshadow app --time-limit)."""
+    return f"This app ends each fit after {time_limit_s:g} s"
+
+
 def limit_note(result, time_limit_s: float | None) -> str:
     """The status's words when the host's time limit, not the search, ended a fit that failed
     the success test ("" otherwise)."""
     if time_limit_s is None or result.success or result.interrupted or not result.posed.fit.get("time_limited"):
         return ""
-    return (
-        f"  \nThis app ends each fit after {time_limit_s:g} s; `handshadow fit` on your own computer searches longer."
-    )
+    return f"  \n{host_limit(time_limit_s)}; `handshadow fit` on your own computer searches longer."
 
 
 def side_by_side(images: list[np.ndarray], gap: int = 8) -> np.ndarray:
@@ -405,11 +408,7 @@ def morph_steps(
     files = [str(result / n) for n in ("animation.mp4", "animation.gif", "path.png")]
     warnings = [f"**Warning ({end}):** {t.warning}  \n" for end, t in zip(("first", "last"), targets) if t.warning]
     ended = [end for end, t in zip(("first", "last"), report.time_limited) if t]
-    limited = (
-        f"  \nThis app ends each fit after {time_limit_s:g} s: it cut the {' and '.join(ended)} end's short."
-        if ended
-        else ""
-    )
+    limited = f"  \n{host_limit(time_limit_s)}: it cut the {' and '.join(ended)} end's short." if ended else ""
     return (*files, zip_path, "".join(warnings) + report.summary() + limited)
 
 
@@ -692,7 +691,7 @@ def layout(gr, example_names: list[str], time_limit_s: float | None = None) -> t
         "Make a shadow with your hands. **1.** Choose a shape: an example, your own picture (a photo of a "
         "shadow on a wall works too), or a drawing. **2.** Press **Fit** and watch the hands find it. "
         "**3.** Turn the 3D hands around, read how to hold them, and try it with a lamp and a wall."
-        + (f" This app ends each fit after {time_limit_s:g} s." if time_limit_s else ""),
+        + (f" {host_limit(time_limit_s)}." if time_limit_s else ""),
         elem_id="intro",
     )
     with gr.Tab("Shadow"):
