@@ -18,7 +18,7 @@ from handshadow.cli import main
 from handshadow.fit import FitConfig, fit_frame
 from handshadow.hands.posed import cast_shadow
 from handshadow.library import load_library_pose
-from handshadow.scene import LAMP_TO_WALL_M, Scene
+from handshadow.scene import LAMP_TO_WALL_M, Scene, frame_height_for
 
 PY = [sys.executable, "-m", "handshadow.cli"]
 OUTPUTS = {
@@ -53,10 +53,14 @@ def test_fit_recovers_a_shadow_rendered_from_a_known_pose(lamp_to_wall_m):
     )
     result = fit_frame(target, config)
     assert result.score.success, result.score
-    assert result.posed.scene == truth.scene  # the lamp where it was asked for
-    # The answer comes back: the hand casts its shadow where the true hand casts it.
     scene = result.posed.scene
-    true_wrist = scene.project(torch.as_tensor(truth.hands[0].translation)[None])[0][0]
+    assert scene.light == truth.scene.light  # the lamp where it was asked for
+    # The frame on the wall is sized to the dog's shadow (longer side 0.78 of the frame), so
+    # its pixels are those of the truth's frame, only smaller on the wall.
+    assert scene.frame_height_m == pytest.approx(frame_height_for([target]))
+    assert scene.frame_height_m < truth.scene.frame_height_m
+    # The answer comes back: the hand casts its shadow where the true hand casts it.
+    true_wrist = truth.scene.project(torch.as_tensor(truth.hands[0].translation)[None])[0][0]
     got_wrist = scene.project(torch.as_tensor(result.posed.hands[0].translation)[None])[0][0]
     assert float((true_wrist - got_wrist).norm()) < 0.12 * 128
 

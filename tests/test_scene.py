@@ -1,12 +1,22 @@
 """The scene's lamp distance: a farther lamp keeps the frame on the wall, casts a hand at its
-working depth at the same size, and distances out of range are refused."""
+working depth at the same size, and distances out of range are refused. The frame on the wall
+is sized to a target's shape, so that every shape is as large on the wall."""
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
-from handshadow.scene import LAMP_TO_WALL_M, Scene, SceneError, default_views
+from handshadow.scene import (
+    FRAME_HEIGHT_M,
+    LAMP_TO_WALL_M,
+    WORKING_EXTENT,
+    Scene,
+    SceneError,
+    default_views,
+    frame_height_for,
+)
 
 
 def test_a_farther_lamp_keeps_the_frame_and_casts_the_working_depth_at_the_same_size():
@@ -39,3 +49,37 @@ def test_two_views_keep_the_default_lamp_distance():
     assert len(default_views(32, 32, "point", (0.0, 90.0), LAMP_TO_WALL_M)) == 2
     with pytest.raises(SceneError, match="two views"):
         default_views(32, 32, "point", (0.0, 90.0), 3.0)
+
+
+def _box(frame_px: int, rows: int, cols: int) -> np.ndarray:
+    shape = np.zeros((frame_px, frame_px), bool)
+    shape[(frame_px - rows) // 2 :][:rows, 5 : 5 + cols] = True
+    return shape
+
+
+@pytest.mark.parametrize("light", ["point", "directional"])
+def test_the_frame_is_sized_so_that_the_shape_has_the_working_size_on_the_wall(light):
+    default = FRAME_HEIGHT_M[light]
+    # A shape cropped tight (its longer side 250 of 256 px) gets a smaller frame on the wall,
+    # one that leaves it the working size in metres; a small one (64 px) a larger frame.
+    for longest in (250, 64):
+        height = frame_height_for([_box(256, 40, longest)], light)
+        assert longest / 256 * height == pytest.approx(WORKING_EXTENT * default)
+        scene = Scene.default(256, 256, light=light, frame_height_m=height)
+        assert scene.frame_height_m == pytest.approx(height) and scene.image.width == 256
+    # The working size itself, and within the tolerance of it: the default frame.
+    assert frame_height_for([_box(256, round(WORKING_EXTENT * 256), 30)], light) is None
+    assert frame_height_for([_box(256, 30, round(1.04 * WORKING_EXTENT * 256))], light) is None
+    # Several shapes share one frame, sized to the largest; a tiny one's frame is bounded.
+    both = frame_height_for([_box(256, 64, 20), _box(256, 20, 250)], light)
+    assert both == frame_height_for([_box(256, 20, 250)], light)
+    assert frame_height_for([_box(256, 4, 4)], light) == pytest.approx(4.0 * default)
+    assert frame_height_for([np.zeros((32, 32), bool)], light) is None
+
+
+@pytest.mark.parametrize("metres", [0.0, -1.0, math.nan, math.inf])
+def test_a_frame_height_that_is_no_length_is_refused(metres):
+    with pytest.raises(SceneError, match="frame's height"):
+        Scene.default(frame_height_m=metres)
+    with pytest.raises(SceneError, match="two views keep the default frame"):
+        default_views(32, 32, "point", (0.0, 90.0), LAMP_TO_WALL_M, 0.6)

@@ -28,7 +28,14 @@ from handshadow.hands.posed import PosedMesh, cast_shadows
 from handshadow.metrics import FitScore, Part, ViewScores, iou, score, thin_parts, uncovered_parts
 from handshadow.posefile import parse_pose
 from handshadow.poses import PoseBatch, PosedScene
-from handshadow.scene import FIT_LAMP_TO_WALL_M, LAMP_TO_WALL_M, Scene, check_view_angle, default_views
+from handshadow.scene import (
+    FIT_LAMP_TO_WALL_M,
+    LAMP_TO_WALL_M,
+    Scene,
+    check_view_angle,
+    default_views,
+    frame_height_for,
+)
 from handshadow.search import (
     Finishing,
     GiveUp,
@@ -150,7 +157,10 @@ class FitConfig:
     failures alone: attempts are deterministic, and a later one only adds to the earlier).
     hand_shape: the hands' shape, the person's own (Anny: phenotype values in [0, 1] by name,
     hands.anny.PHENOTYPES; MANO: {"betas": [...]}; empty: the model's default hand); pose.json
-    records it with each hand. The search's starts are the default hand's poses."""
+    records it with each hand. The search's starts are the default hand's poses.
+    frame_height_m: the image frame's height on the wall, metres (None: with one view, sized to
+    the target so that its shape has the size the search works at, scene.frame_height_for;
+    with two, scene.FRAME_HEIGHT_M). Only scene.json's metres follow it: the pixels do not."""
 
     hands: str = "auto"
     size: int = 256
@@ -174,6 +184,7 @@ class FitConfig:
     hops: int | None = None
     skip_attempts: int = 0
     hand_shape: dict = dataclasses.field(default_factory=dict)
+    frame_height_m: float | None = None
 
 
 @dataclasses.dataclass
@@ -581,7 +592,8 @@ def _complete(
 
 
 def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
-    """The scene of each target (H, W): view 0 is Scene.default; view 1 the same turned by
+    """The scene of each target (H, W): view 0 is Scene.default (one view: its frame sized to the
+    target, config.frame_height_m); view 1 the same turned by
     config.view_angle_deg about the vertical axis through the hands' working volume. Raises
     HandshadowError for more than MAX_VIEWS targets, targets of different sizes, an angle out
     of range (scene.check_view_angle), view weights that do not fit, or a lamp distance out of
@@ -600,7 +612,10 @@ def view_scenes(targets: list[np.ndarray], config: FitConfig) -> list[Scene]:
     lamp = config.lamp_to_wall_m
     if lamp is None:
         lamp = FIT_LAMP_TO_WALL_M if len(targets) == 1 else LAMP_TO_WALL_M
-    return default_views(width, height, config.light, angles, lamp)
+    frame = config.frame_height_m
+    if frame is None and len(targets) == 1:
+        frame = frame_height_for(targets, config.light)
+    return default_views(width, height, config.light, angles, lamp, frame)
 
 
 def _finish(

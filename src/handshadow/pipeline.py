@@ -41,7 +41,7 @@ from handshadow.hands.posed import PosedMesh, arm_check, cast_shadows, hand_mode
 from handshadow.hands.rig import hand_length_m
 from handshadow.interpolate import PathReport, morph_targets, refine_path, report, straight_path
 from handshadow.poses import PoseBatch, PosedScene
-from handshadow.scene import Scene, views_to_json
+from handshadow.scene import FRAME_HEIGHT_M, Scene, frame_height_for, views_to_json
 from handshadow.search import Interrupted, Progress
 from handshadow.target import load_target
 
@@ -299,6 +299,9 @@ def interpolate_to_folder(
         raise HandshadowError(f"--frames must be between 2 and 600, got {frames}")
     target_a = resolve_target(source_a, config.size, config.size)
     target_b = resolve_target(source_b, config.size, config.size)
+    if config.frame_height_m is None:  # one frame on the wall for both ends, sized to the larger shape
+        shared = frame_height_for([target_a, target_b], config.light) or FRAME_HEIGHT_M[config.light]
+        config = dataclasses.replace(config, frame_height_m=shared)
     say = (lambda msg: print(msg, file=sys.stderr, flush=True)) if show_progress else (lambda msg: None)
     say("fitting A ...")
     fit_a = fit_frame(target_a, config)

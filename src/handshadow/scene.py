@@ -48,6 +48,14 @@ LAMP_TO_WALL_RANGE_M = (LAMP_TO_WALL_M, 5.0)
 # it hides behind the hand far better (docs/measured.md, "Lamp distance": 16 HSP targets, 10 against 8).
 FIT_LAMP_TO_WALL_M = 4.0
 FRAME_HEIGHT_M = {"point": 0.8, "directional": 0.4}  # a hand's shadow fills about half of it
+# The shape's size on the wall that the search works at: its longer side is this share of the
+# default frame's height (each of the 95 HSP masks: 0.711 to 0.719). A fit sizes its frame on
+# the wall (one view) so that the target's shape has that size whatever the picture's margins
+# (frame_height_for): a tightly cropped shape, drawn larger in its frame, would otherwise ask for
+# hands nearer the lamp, whose forearms then show (docs/measured.md, "A shape's size in its frame").
+WORKING_EXTENT = 0.715
+FRAME_SIZE_TOLERANCE = 0.05  # a shape within this share of that size keeps the default frame
+FRAME_SCALE_RANGE = (0.25, 4.0)  # the frame's height, times the default, at the most
 # Where hands belong, as distances in front of the wall (Scene.placement_range):
 WALL_CLEARANCE_M = 0.03  # the nearest a hand comes to the wall while the search runs
 LAMP_CLEARANCE_M = 0.25  # room kept before the lamp (a point light)
@@ -109,16 +117,23 @@ class Scene:
     # -- construction -------------------------------------------------------------------
     @staticmethod
     def default(
-        width: int = 256, height: int = 256, light: LightType = "point", lamp_to_wall_m: float = LAMP_TO_WALL_M
+        width: int = 256,
+        height: int = 256,
+        light: LightType = "point",
+        lamp_to_wall_m: float = LAMP_TO_WALL_M,
+        frame_height_m: float | None = None,
     ) -> Scene:
         """A lamp ``lamp_to_wall_m`` (default 2 m, within LAMP_TO_WALL_RANGE_M) in front of a
-        wall, the image frame centred on the wall; the frame's size does not depend on it."""
+        wall, the image frame centred on the wall; the frame's size does not depend on it. The
+        frame is ``frame_height_m`` high on the wall (None: FRAME_HEIGHT_M of the light)."""
         check_lamp_distance(lamp_to_wall_m)
         if light not in ("point", "directional"):
             raise SceneError(f"light must be 'point' or 'directional', got {light!r}")
         if width < 1 or height < 1:
             raise SceneError(f"image size must be positive, got {width} x {height}")
-        h_m = FRAME_HEIGHT_M[light]
+        h_m = FRAME_HEIGHT_M[light] if frame_height_m is None else float(frame_height_m)
+        if not (math.isfinite(h_m) and h_m > 0):
+            raise SceneError(f"the frame's height must be a positive number of metres, got {h_m:g}")
         w_m = h_m * width / height
         lamp = (0.0, 0.0, float(lamp_to_wall_m))
         return Scene(
@@ -160,6 +175,11 @@ class Scene:
             wall=Wall(point=point(self.wall.point), normal=direction(self.wall.normal)),
             image=ImageFrame(im.width, im.height, point(im.origin), vector(im.u), vector(im.v)),
         )
+
+    @property
+    def frame_height_m(self) -> float:
+        """The image frame's height on the wall (metres)."""
+        return float(np.linalg.norm(self.image.v))
 
     def with_size(self, width: int, height: int) -> Scene:
         """The same frame rasterised at another resolution."""
@@ -329,14 +349,36 @@ def default_views(
     light: LightType = "point",
     angles_deg: tuple[float, ...] = (0.0,),
     lamp_to_wall_m: float = LAMP_TO_WALL_M,
+    frame_height_m: float | None = None,
 ) -> list[Scene]:
     """One default scene per view: view k is :meth:`Scene.default` turned by angles_deg[k]
     (0 for view 0) about the vertical axis through VIEW_AXIS_POINT_M. Several views need the
-    default lamp distance (the turns are laid out for it); SceneError otherwise."""
+    default lamp distance and frame (the turns are laid out for them); SceneError otherwise."""
     if len(angles_deg) > 1 and lamp_to_wall_m != LAMP_TO_WALL_M:
         raise SceneError(f"two views need the default lamp distance ({LAMP_TO_WALL_M:g} m), got {lamp_to_wall_m:g} m")
-    base = Scene.default(width, height, light=light, lamp_to_wall_m=lamp_to_wall_m)
+    if len(angles_deg) > 1 and frame_height_m is not None:
+        raise SceneError("two views keep the default frame on the wall")
+    base = Scene.default(width, height, light=light, lamp_to_wall_m=lamp_to_wall_m, frame_height_m=frame_height_m)
     return [base if a == 0 else base.turned(a) for a in angles_deg]
+
+
+def frame_height_for(shapes: list[np.ndarray], light: LightType = "point") -> float | None:
+    """The frame's height on the wall (metres) at which the largest of ``shapes`` (each (H, W)
+    bool, True in the shape, one frame size) has its longer side WORKING_EXTENT of the default
+    frame's height; None (the default frame) when it already has within FRAME_SIZE_TOLERANCE
+    of that size or no shape has a pixel. The frame's scale stays in FRAME_SCALE_RANGE."""
+    longest = 0
+    for shape in shapes:
+        rows, cols = np.nonzero(np.asarray(shape, bool))
+        if len(rows):
+            longest = max(longest, int(np.ptp(rows)) + 1, int(np.ptp(cols)) + 1)
+    if longest == 0:
+        return None
+    height = np.asarray(shapes[0]).shape[0]
+    scale = WORKING_EXTENT * height / longest  # the frame's height on the wall, times the default
+    if abs(scale - 1.0) <= FRAME_SIZE_TOLERANCE:
+        return None
+    return FRAME_HEIGHT_M[light] * float(np.clip(scale, *FRAME_SCALE_RANGE))
 
 
 def check_lamp_distance(metres: float) -> None:

@@ -4,6 +4,7 @@ moves their shadow as the alignment said."""
 import math
 
 import numpy as np
+import pytest
 import torch
 
 from handshadow.metrics import iou
@@ -95,3 +96,30 @@ def test_two_hand_atlas_starts_can_be_held_by_one_person_and_some_are_kept():
     assert float((depths[0] - depths[1]).abs().max()) < 0.5  # metres: a person's two hands
     chosen = choose_starts(problem, sides, 16, 12, np.random.default_rng(0), atlas=atlas)
     assert any(o.kind == "atlas" for o in chosen.origins)
+
+
+def test_atlas_shadows_are_enlarged_into_a_frame_sized_to_its_target():
+    """An atlas entry stands for the shadow its hand casts at the scene's working depth. In a
+    frame smaller on the wall (a target cropped tight, scene.frame_height_for) that shadow is
+    larger in pixels, and the entry is enlarged to match it; unenlarged it would be off by the
+    frames' ratio, and the pairs' second hands placed at the wrong size."""
+    from handshadow.fit import FitConfig, make_problem
+    from handshadow.poses import PoseBatch
+    from handshadow.scene import FIT_LAMP_TO_WALL_M, Scene
+    from handshadow.search.atlas import load_atlas
+    from handshadow.search.starts import _atlas_hands, _atlas_masks, atlas_zoom
+
+    atlas = load_atlas("anny", True, "anatomical")
+    idx = np.array([5, 300, 1200])
+    target = np.zeros((64, 64), bool)
+    target[20:40, 20:40] = True
+    for frame_m, zoom in ((None, 1.0), (0.6, 0.8 / 0.6), (1.2, 0.8 / 1.2)):
+        scene = Scene.default(64, 64, lamp_to_wall_m=FIT_LAMP_TO_WALL_M, frame_height_m=frame_m)
+        assert atlas_zoom(scene) == pytest.approx(zoom)
+        problem = make_problem(target, scene, ["right"], FitConfig(size=64))
+        cast = problem.shadows(PoseBatch([_atlas_hands(atlas, idx, "right", scene.working_depth())]), 64).cpu() > 0.5
+        entries = _atlas_masks(atlas, idx, "right", atlas_zoom(scene), pivot_pixel(scene, 64)) > 0.5
+        for k in range(len(idx)):
+            area = float(entries[k].sum()) / float(cast[k].sum())
+            assert 0.9 < area < 1.1, (frame_m, k, area)  # unenlarged: 0.56 or 2.25
+            assert iou(entries[k].numpy(), cast[k].numpy()) > 0.8

@@ -23,6 +23,7 @@ from handshadow.hands.rig import FINGERS
 from handshadow.library import library_names, load_library_pose
 from handshadow.metrics import iou
 from handshadow.poses import HandPose, HandPoseBatch, Origin, PoseBatch
+from handshadow.scene import FRAME_HEIGHT_M
 from handshadow.search.atlas import WRIST_DEPTH_M, Atlas, shape_descriptor
 
 log = logging.getLogger(__name__)
@@ -391,7 +392,8 @@ def atlas_starts(atlas: Atlas, target: torch.Tensor, sides: list[str], scene) ->
     if len(sides) == 1:
         return PoseBatch([first], [Origin("atlas", str(i)) for i in nearest])
     pivot = pivot_pixel(scene, target.shape[0])
-    masks = _atlas_masks(atlas, nearest, first_side)
+    zoom = atlas_zoom(scene)
+    masks = _atlas_masks(atlas, nearest, first_side, zoom, pivot)
     angle, scale, shift, _ = similarity_align(masks, target, pivot, ALIGN_ANGLES_DEG, ALIGN_SCALES)
     placed = apply_similarity(PoseBatch([first]), angle, scale, shift, scene, target.shape[0])
     covered = _warp_each(masks, angle, scale, shift, pivot)
@@ -401,7 +403,7 @@ def atlas_starts(atlas: Atlas, target: torch.Tensor, sides: list[str], scene) ->
         if float(rest.sum()) < SECOND_HAND_MIN_SHARE * float(target.sum()):
             rest = target  # the first hand covers it: the other hand goes over the whole shape
         second_idx = atlas.nearest(shape_descriptor(rest[None])[0].numpy(), ATLAS_SECOND)
-        second_masks = _atlas_masks(atlas, second_idx, sides[1])
+        second_masks = _atlas_masks(atlas, second_idx, sides[1], zoom, pivot)
         same_size = scale[k].expand(len(second_idx))  # atlas entries share one depth, so one size
         a2, s2, t2, _ = similarity_align(second_masks, rest, pivot, ALIGN_ANGLES_DEG, ALIGN_SCALES, base=same_size)
         second = apply_similarity(
@@ -429,11 +431,23 @@ def _atlas_hands(atlas: Atlas, idx: np.ndarray, side: str, depth_m: float) -> Ha
     return HandPoseBatch(hands.pose_rad, m @ hands.rotation @ m, hands.translation @ m.T, hands.wrist_rad)
 
 
-def _atlas_masks(atlas: Atlas, idx: np.ndarray, side: str) -> torch.Tensor:
+def atlas_zoom(scene) -> float:
+    """How much larger, in pixels, a shadow cast at the scene's working depth is than the same
+    hand's atlas entry: the default frame's height over the scene's (a frame sized to its
+    target, scene.frame_height_for, is smaller or larger on the wall)."""
+    return FRAME_HEIGHT_M[scene.light.type] / scene.frame_height_m
+
+
+def _atlas_masks(atlas: Atlas, idx: np.ndarray, side: str, zoom: float = 1.0, pivot=None) -> torch.Tensor:
     """(k, H, W) float shadows of entries idx as the given side's hand (mirrored for the left:
-    the frame is centred on the lamp's foot)."""
+    the frame is centred on the lamp's foot), enlarged ``zoom`` times about ``pivot`` (the
+    lamp's foot, pixels) into the scene's frame (:func:`atlas_zoom`)."""
     masks = torch.as_tensor(atlas.masks[idx], dtype=torch.float32)
-    return masks if side == "right" else torch.flip(masks, [2])
+    masks = masks if side == "right" else torch.flip(masks, [2])
+    if zoom == 1.0 or len(masks) == 0:
+        return masks
+    k = len(masks)
+    return _warp(masks, torch.eye(2), torch.full((k,), zoom), torch.zeros(k, 2), pivot)
 
 
 def _warp_each(masks, angle, scale, shift, pivot) -> torch.Tensor:
