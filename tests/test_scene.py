@@ -75,6 +75,11 @@ def test_the_frame_is_sized_so_that_the_shape_has_the_working_size_on_the_wall(l
     assert both == frame_height_for([_box(256, 20, 250)], light)
     assert frame_height_for([_box(256, 4, 4)], light) == pytest.approx(4.0 * default)
     assert frame_height_for([np.zeros((32, 32), bool)], light) is None
+    # A shape that runs off the frame (an arm leaving the picture) has no known size.
+    cut = _box(256, 40, 250)
+    cut[100, 0] = True
+    assert frame_height_for([cut], light) is None
+    assert frame_height_for([_box(256, 20, 250), cut], light) is None
 
 
 @pytest.mark.parametrize("metres", [0.0, -1.0, math.nan, math.inf])

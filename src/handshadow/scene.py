@@ -366,10 +366,15 @@ def frame_height_for(shapes: list[np.ndarray], light: LightType = "point") -> fl
     """The frame's height on the wall (metres) at which the largest of ``shapes`` (each (H, W)
     bool, True in the shape, one frame size) has its longer side WORKING_EXTENT of the default
     frame's height; None (the default frame) when it already has within FRAME_SIZE_TOLERANCE
-    of that size or no shape has a pixel. The frame's scale stays in FRAME_SCALE_RANGE."""
+    of that size, when a shape runs off the frame (it touches the frame's edge, so its size is
+    not known: a forearm's shadow leaving the picture) or when no shape has a pixel. The
+    frame's scale stays in FRAME_SCALE_RANGE."""
     longest = 0
     for shape in shapes:
-        rows, cols = np.nonzero(np.asarray(shape, bool))
+        shape = np.asarray(shape, bool)
+        if shape[0].any() or shape[-1].any() or shape[:, 0].any() or shape[:, -1].any():
+            return None
+        rows, cols = np.nonzero(shape)
         if len(rows):
             longest = max(longest, int(np.ptp(rows)) + 1, int(np.ptp(cols)) + 1)
     if longest == 0:
