@@ -53,16 +53,33 @@ def test_fit_recovers_a_shadow_rendered_from_a_known_pose(lamp_to_wall_m):
     )
     result = fit_frame(target, config)
     assert result.score.success, result.score
-    scene = result.posed.scene
-    assert scene.light == truth.scene.light  # the lamp where it was asked for
-    # The frame on the wall is sized to the dog's shadow (longer side 0.78 of the frame), so
-    # its pixels are those of the truth's frame, only smaller on the wall.
-    assert scene.frame_height_m == pytest.approx(frame_height_for([target]))
-    assert scene.frame_height_m < truth.scene.frame_height_m
-    # The answer comes back: the hand casts its shadow where the true hand casts it.
+    # The lamp where it was asked for, and the default frame: the dog's forearm runs off it.
+    assert result.posed.scene == truth.scene
+    _assert_wrists_cast_alike(result, truth, 128)
+
+
+def _assert_wrists_cast_alike(result, truth, frame_px: int) -> None:
+    """The answer comes back: the hand casts its shadow where the true hand casts it."""
     true_wrist = truth.scene.project(torch.as_tensor(truth.hands[0].translation)[None])[0][0]
-    got_wrist = scene.project(torch.as_tensor(result.posed.hands[0].translation)[None])[0][0]
-    assert float((true_wrist - got_wrist).norm()) < 0.12 * 128
+    got_wrist = result.posed.scene.project(torch.as_tensor(result.posed.hands[0].translation)[None])[0][0]
+    assert float((true_wrist - got_wrist).norm()) < 0.12 * frame_px
+
+
+def test_a_shape_drawn_large_in_its_frame_is_fitted_in_a_smaller_frame_and_comes_back():
+    # The rabbit's hand without its forearm: a whole shape whose longer side is 0.87 of the
+    # frame, larger than the search's working size (0.715), so the fit's frame on the wall is
+    # smaller than the truth's; its pixels, and the shadow in them, are the same.
+    _, truth = known_target("rabbit", 128, 4.0)
+    truth = dataclasses.replace(truth, forearm=False)
+    target = cast_shadow(truth)[1] > 0.5
+    config = FitConfig(hands="1", size=128, quality="fast", seed=1, exclude_library=("rabbit",), forearm=False)
+    result = fit_frame(target, config)
+    assert result.score.success, result.score
+    scene = result.posed.scene
+    assert scene.light == truth.scene.light and scene.image.width == 128
+    assert scene.frame_height_m == pytest.approx(frame_height_for([target]))
+    assert scene.frame_height_m < 0.9 * truth.scene.frame_height_m
+    _assert_wrists_cast_alike(result, truth, 128)
 
 
 @pytest.fixture(scope="module")
