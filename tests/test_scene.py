@@ -86,5 +86,8 @@ def test_the_frame_is_sized_so_that_the_shape_has_the_working_size_on_the_wall(l
 def test_a_frame_height_that_is_no_length_is_refused(metres):
     with pytest.raises(SceneError, match="frame's height"):
         Scene.default(frame_height_m=metres)
+
+
+def test_two_views_keep_the_default_frame():
     with pytest.raises(SceneError, match="two views keep the default frame"):
         default_views(32, 32, "point", (0.0, 90.0), LAMP_TO_WALL_M, 0.6)
