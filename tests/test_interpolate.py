@@ -73,6 +73,7 @@ def test_interpolation_meets_the_bounds(morph, capsys):
     assert float(summary["hd95_start"]) <= 0.03 and float(summary["hd95_end"]) <= 0.03
     assert float(summary["max_step_deg"]) <= 10.0
     assert int(summary["penetrating_frames"]) == 0
+    assert "time_limited" not in poses["summary"]  # no limit given, none ended a part
 
 
 def test_interpolation_outputs(morph, tmp_path):
@@ -147,12 +148,19 @@ def test_ctrl_c_while_refining_keeps_the_path_so_far(morph, tmp_path, monkeypatc
     assert len(list((out / "frames").glob("frame_*_shadow.png"))) == 6 and (out / "animation.mp4").exists()
 
 
-def test_a_time_limit_bounds_each_end_and_the_summary_says_so(morph, tmp_path, capsys):
+def test_a_time_limit_bounds_each_end_and_the_path_and_the_summary_says_so(morph, tmp_path, monkeypatch, capsys):
+    import handshadow.interpolate
+
+    real, taken = handshadow.interpolate.optimise, []
+    monkeypatch.setattr(
+        "handshadow.interpolate.optimise", lambda *args, **kwargs: taken.append(real(*args, **kwargs)) or taken[-1]
+    )
     out = tmp_path / "out"
     options = "--frames 4 --hands 1 --size 64 --quality fast --device cpu --time-limit 1e-6 --out".split()
     code = main(["interpolate", str(morph.parent / "dog.png"), str(morph.parent / "duck.png")] + options + [str(out)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    assert captured.out.strip().splitlines()[-1].endswith(" time_limited=start,end")
+    assert captured.out.strip().splitlines()[-1].endswith(" time_limited=start,end,path")
     assert captured.err.count("; the time limit ended it)") == 2  # each end's fit, as it is said
-    assert json.loads((out / "poses.json").read_text())["summary"].endswith("time_limited=start,end")
+    assert json.loads((out / "poses.json").read_text())["summary"].endswith("time_limited=start,end,path")
+    assert taken[0] == 1  # the path's refinement: one step of its 200, then the limit

@@ -407,8 +407,13 @@ def morph_steps(
     zip_path = shutil.make_archive(str(folder / "handshadow-morph"), "zip", result)
     files = [str(result / n) for n in ("animation.mp4", "animation.gif", "path.png")]
     warnings = [f"**Warning ({end}):** {t.warning}  \n" for end, t in zip(("first", "last"), targets) if t.warning]
-    ended = [end for end, t in zip(("first", "last"), report.time_limited) if t]
-    limited = f"  \n{host_limit(time_limit_s)}: it cut the {' and '.join(ended)} end's short." if ended else ""
+    ended = [
+        part
+        for part, t in zip(("the first end's fit", "the last end's fit", "the path's smoothing"), report.time_limited)
+        if t
+    ]
+    listed = ", ".join(ended[:-1]) + " and " + ended[-1] if len(ended) > 1 else "".join(ended)
+    limited = f"  \n{host_limit(time_limit_s)}: it cut {listed} short." if ended else ""
     return (*files, zip_path, "".join(warnings) + report.summary() + limited)
 
 

@@ -11,6 +11,7 @@ differences); a hinge keeps every step under the step limit. The end frames stay
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import torch
@@ -109,16 +110,21 @@ def refine_path(
     steps: int = 200,
     weights: PathWeights = PathWeights(),
     height: int = 96,
-) -> PoseBatch:
+    time_limit_s: float | None = None,
+) -> tuple[PoseBatch, bool]:
     """Optimise the in-between frames of a path (the first and last stay fixed): smoothness
     over the whole path, and per frame penetration, placement and the morph target
     ``morph`` (F, H, W) bool as a soft silhouette target. Then, while the exact mesh test
     finds frames whose hands pass through each other (hands.penetration), rounds of
-    CONTACT_STEPS more steps push those contacts out too. Ctrl-C raises :class:`Interrupted`
-    with the path as refined so far."""
+    CONTACT_STEPS more steps push those contacts out too. ``time_limit_s`` (None or 0: no
+    limit) ends the first part after about that many seconds; the contacts' rounds still
+    follow, as a fit's separation follows its time limit. Returns the path and whether the
+    limit ended its refinement. Ctrl-C raises :class:`Interrupted` with the path as refined
+    so far."""
     if path.batch <= 2:
-        return path
+        return path, False
     current = path
+    deadline = time.perf_counter() + time_limit_s if time_limit_s else None
     try:
         level = problem.level(height)
         targets = torch.as_tensor(
@@ -126,21 +132,24 @@ def refine_path(
             dtype=problem.dtype,
             device=problem.device,
         )
-        current = _refine(problem, current, level, targets, steps, weights)
+        current, taken = _refine(problem, current, level, targets, steps, weights, deadline=deadline)
         for _ in range(CONTACT_ROUNDS):
             found = problem.mesh_penetration(current)[1:-1]  # the end frames are the fits, apart
             deep = [f.contacts for f in found if f.deepest_mm > TOLERANCE_MM]
             if not deep:
                 break
-            current = _refine(problem, current, level, targets, CONTACT_STEPS, weights, Contacts.cat(deep))
+            current, _ = _refine(problem, current, level, targets, CONTACT_STEPS, weights, Contacts.cat(deep))
     except KeyboardInterrupt:  # between the rounds: the path as refined so far
         raise Interrupted(current) from None
-    return current
+    return current, taken < steps
 
 
-def _refine(problem, path, level, targets, steps, weights, contacts: Contacts | None = None) -> PoseBatch:
-    """Steps of the path objective (plus the contacts' push, when given); Ctrl-C raises
-    Interrupted with the path reached."""
+def _refine(
+    problem, path, level, targets, steps, weights, contacts: Contacts | None = None, deadline: float | None = None
+) -> tuple[PoseBatch, int]:
+    """Steps of the path objective (plus the contacts' push, when given), ending early once
+    time.perf_counter() passes ``deadline``; returns the path and the steps taken. Ctrl-C
+    raises Interrupted with the path reached."""
     params = PoseParameters(path, problem.limits)
     free = torch.ones(path.batch, dtype=problem.dtype, device=problem.device)  # the end frames stay the fits
     free[0] = free[-1] = 0
@@ -160,11 +169,12 @@ def _refine(problem, path, level, targets, steps, weights, contacts: Contacts | 
         loss = weights.smooth * smooth + weights.accel * accel + weights.step_hinge * hinge + (per_frame * free).sum()
         return loss, None
 
+    past = None if deadline is None else (lambda step, seen: time.perf_counter() > deadline)
     try:
-        optimise(params, evaluate, steps, problem.rates.scaled(PATH_LR_SCALE), grad_mask=free)
+        taken = optimise(params, evaluate, steps, problem.rates.scaled(PATH_LR_SCALE), after=past, grad_mask=free)
     except KeyboardInterrupt:
         raise Interrupted(params.poses()) from None
-    return params.poses()
+    return params.poses(), taken
 
 
 @dataclasses.dataclass
@@ -182,10 +192,11 @@ class PathReport:
     steps_deg: list[float]
     penetration_mm: list[float]
     interrupted: bool = False  # Ctrl-C during the path refinement: the path as refined so far
-    time_limited: tuple[bool, bool] = (False, False)  # the time limit ended the fit of the start, of the end
+    # the time limit ended the fit of the start, of the end, the path's refinement
+    time_limited: tuple[bool, bool, bool] = (False, False, False)
 
     def summary(self) -> str:
-        ended = ",".join(end for end, t in zip(("start", "end"), self.time_limited) if t)
+        ended = ",".join(end for end, t in zip(("start", "end", "path"), self.time_limited) if t)
         return (
             f"SUMMARY iou_start={self.iou_start:.3f} iou_end={self.iou_end:.3f} thin_start={self.thin_start:.3f} "
             f"thin_end={self.thin_end:.3f} hd95_start={self.hd95_start:.4f} hd95_end={self.hd95_end:.4f} "

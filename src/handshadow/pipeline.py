@@ -291,8 +291,10 @@ def interpolate_to_folder(
     and write frames/, animation.gif, animation.mp4, poses.json, path.png, target_a.png,
     target_b.png. Returns (folder, PathReport).
 
-    Ctrl-C while fitting an end stops the whole morph (KeyboardInterrupt, nothing written);
-    Ctrl-C while refining the path writes the path as refined so far (report.interrupted)."""
+    config.time_limit_s bounds each end's fit and the path's refinement, each on its own
+    (report.time_limited says which it ended). Ctrl-C while fitting an end stops the whole
+    morph (KeyboardInterrupt, nothing written); Ctrl-C while refining the path writes the path
+    as refined so far (report.interrupted)."""
     ResultFolder(out, force)
     require_mp4()
     if frames < 2 or frames > 600:
@@ -314,13 +316,16 @@ def interpolate_to_folder(
     say(f"fitting B: {_judged(fit_b)}; refining the path (Ctrl-C keeps the path so far) ...")
     problem = fit_a.problem
     path = straight_path(fit_a.poses, fit_b.poses, frames)
-    interrupted = False
+    interrupted = path_limited = False
     try:
-        path = refine_path(problem, path, morph_targets(target_a, target_b, frames), steps=path_steps)
+        path, path_limited = refine_path(
+            problem, path, morph_targets(target_a, target_b, frames), steps=path_steps, time_limit_s=config.time_limit_s
+        )
     except Interrupted as halt:
         path, interrupted = halt.poses, True
     rep, shadows = report(problem, path, target_a, target_b, interrupted)
-    rep = dataclasses.replace(rep, time_limited=(fit_a.posed.fit["time_limited"], fit_b.posed.fit["time_limited"]))
+    ends_limited = (fit_a.posed.fit["time_limited"], fit_b.posed.fit["time_limited"])
+    rep = dataclasses.replace(rep, time_limited=(*ends_limited, path_limited))
     poses_json = path_pose_file(path, fit_a.posed, rep)
     views = performance_views(problem, path, fit_a.posed, config.size)
     pictures = [np.concatenate([np.repeat(mask_image(m)[..., None], 3, axis=2), v], 1) for m, v in zip(shadows, views)]
