@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -17,10 +18,16 @@ class OutputError(HandshadowError):
     """The output folder cannot be used."""
 
 
+# Every result folder lists the names handshadow wrote there (one a line), so that a result
+# written over it with --force drops the old result's files and keeps only the person's own.
+MANIFEST = ".handshadow-files"
+
+
 class ResultFolder:
     """Collects a result in a hidden sibling folder and renames it into place on ``commit``.
 
-    A non-empty target folder is refused unless ``force``. If anything fails (or the process is
+    A non-empty target folder is refused unless ``force``, and so is a place where no folder
+    can be made (checked at once, before any work). If anything fails (or the process is
     interrupted or killed) before ``commit``, the target folder is left as it was; ``commit``
     swaps whole folders by rename, so the target never holds part of a result, even when the
     process dies in the middle of it.
@@ -36,6 +43,7 @@ class ResultFolder:
             raise OutputError(f"output path {self.path} exists and is not a folder")
         if self.path.is_dir() and any(self.path.iterdir()) and not force:
             raise OutputError(f"output folder {self.path} is not empty (use --force to overwrite)")
+        _check_writable(self.path)
         self.staging = self.path.parent / f".{self.path.name}.partial-{os.getpid()}"
 
     def __enter__(self) -> ResultFolder:
@@ -51,16 +59,20 @@ class ResultFolder:
         return self.staging / name
 
     def commit(self) -> Path:
-        """Put the staged files in place of the target folder; files already there that the
-        result does not have are kept (same-named ones are replaced).
+        """Put the staged files in place of the target folder, with their MANIFEST; files
+        already there that the result does not have are kept (same-named ones are replaced),
+        except those an earlier result's MANIFEST lists: they belonged to that result.
 
         A missing or empty target folder is replaced by one rename. A non-empty one (``force``)
         first lends its other files to the staged folder (hard links, else copies), then is
         renamed aside, the staged folder renamed in, and the old one removed: at every instant
         the target is the old result or the new one, never a mix."""
+        names = sorted(p.name for p in self.staging.iterdir())
+        (self.staging / MANIFEST).write_text("".join(f"{n}\n" for n in names))
         if self.path.is_dir() and any(self.path.iterdir()):
+            earlier = _listed(self.path) | {MANIFEST}
             for item in self.path.iterdir():
-                if not os.path.lexists(self.staging / item.name):
+                if item.name not in earlier and not os.path.lexists(self.staging / item.name):
                     _link_or_copy(item, self.staging / item.name)
             old = self.path.parent / f".{self.path.name}.old-{os.getpid()}"
             shutil.rmtree(old, ignore_errors=True)
@@ -106,11 +118,38 @@ class StagedFiles:
     def commit(self) -> list[Path]:
         for path in self.paths:
             os.replace(self.staged[path.name], path)
+        for path in self.paths:  # files joining a result folder join its MANIFEST too
+            manifest = path.parent / MANIFEST
+            if manifest.is_file() and path.name not in _listed(path.parent):
+                with manifest.open("a") as f:
+                    f.write(f"{path.name}\n")
         return self.paths
 
     def __exit__(self, *exc) -> None:
         for staged in self.staged.values():
             staged.unlink(missing_ok=True)
+
+
+def _listed(folder: Path) -> set[str]:
+    """The names a result folder's MANIFEST lists (none without one)."""
+    try:
+        return {line for line in (folder / MANIFEST).read_text().splitlines() if line}
+    except (OSError, UnicodeDecodeError):
+        return set()
+
+
+def _check_writable(path: Path) -> None:
+    """OutputError unless a folder can be made at ``path``: its nearest existing ancestor
+    must be a folder that takes new entries (tried with a temporary folder, removed at once)."""
+    ancestor = path.parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise OutputError(f"cannot write to {path}: {ancestor} is not a folder")
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".handshadow-check-", dir=ancestor))
+    except OSError as exc:
+        raise OutputError(f"cannot write to {path}: no folder can be made in {ancestor} ({exc.strerror})") from None
 
 
 def _link_or_copy(src: Path, dest: Path) -> None:
