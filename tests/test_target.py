@@ -155,6 +155,34 @@ def test_bad_targets_are_refused(tmp_path, case):
     assert "\n" not in str(err.value)
 
 
+def test_a_shape_too_small_in_its_picture_is_named_so_not_called_empty(tmp_path):
+    big = np.full((1000, 1000), 255, np.uint8)
+    big[500:540, 500:530][_shape(40, 30)] = 0  # 40 px in a 1000 px picture: 10 px in a 256 px frame
+    iio.imwrite(tmp_path / "small.png", big)
+    with pytest.raises(TargetError, match=r"too small in its picture \(\d+ of its 1000 px across\): crop") as err:
+        load_target(tmp_path / "small.png", 256, 256)
+    assert "--invert" not in str(err.value)
+    cropped = big[400:640, 400:640]  # the same shape, cropped closer, fits
+    iio.imwrite(tmp_path / "cropped.png", cropped)
+    assert load_target(tmp_path / "cropped.png", 256, 256).sum() > 0.002 * 256 * 256
+
+
+def test_a_clean_shape_under_a_percent_of_its_picture_reads_exactly(tmp_path):
+    """Under 1 % of the picture the 99th percentile is the ground's; the shape still reads
+    as the clean mask it is, not through the photo path's smoothing."""
+    big = np.full((600, 600), 255, np.uint8)
+    big[300:360, 300:345][_shape(60, 45)] = 0  # 0.5 % of the picture
+    assert (big == 0).mean() < 0.01
+    reading = read_shape(read_image(_saved(tmp_path, big)))
+    assert reading.warning is None
+    assert np.array_equal(reading.coverage >= 0.5, big == 0)
+
+
+def _saved(tmp_path, image):
+    iio.imwrite(tmp_path / "picture.png", image)
+    return tmp_path / "picture.png"
+
+
 def test_a_cmyk_jpeg_reads_its_colours_not_its_black_ink_as_alpha(tmp_path):
     rgba = np.zeros((40, 40, 3), np.uint8) + 255
     rgba[10:30, 10:30] = 0

@@ -45,6 +45,7 @@ LUMA = np.array([0.299, 0.587, 0.114])  # ITU-R 601 weights: RGB -> brightness
 
 # The photo path (see the module docstring).
 WORK_PX = 64  # longer side of the copy on which the wall's light is estimated
+SMALLEST_SHAPE_PX = 16  # a picture with fewer shape pixels than this is empty (specks), not a small shape
 ENVELOPE_SHARE = 0.6  # the closing's square, a share of that side: darker parts narrower than this are filled
 UNEVEN_GROUND = 0.1  # the ground's light varies by more than this share of the contrast: read as a photo
 SOFT_EDGE = 0.35  # an outline this much softer than the shape's typical one is light, not an edge
@@ -179,6 +180,8 @@ def read_shape(rgba: np.ndarray, invert: bool | None = None) -> Reading:
         cover = 1.0 - cover
     # Stretch between the ground level and the shape level so grey shadows still count.
     lo, hi = np.percentile(cover, 1), np.percentile(cover, 99)
+    if hi - lo < 0.2:  # a shape under 1 % of the picture: its level among the top 0.1 %
+        hi = np.percentile(cover, 99.9)
     if hi - lo < 0.2:  # not a clean shape; a dim photo's may still be there, relative to its wall
         return _read_photo(grey, invert)
     cover = np.clip((cover - lo) / (hi - lo), 0.0, 1.0)
@@ -396,8 +399,26 @@ def read_target(path: str | Path, width: int = 256, height: int = 256, invert: b
     warning when it is unsure."""
     reading = read_shape(read_image(path), invert)
     frame = letterbox(reading.coverage, width, height) >= 0.5
+    shape = reading.coverage >= 0.5
+    if _too_few(frame) and shape.sum() >= SMALLEST_SHAPE_PX:  # a shape, too small for the frame: not empty
+        raise TargetError(f"{path}: {_too_small(shape)}")
     check_target(frame, str(path))
     return Target(frame, reading.warning)
+
+
+def _too_few(shape: np.ndarray) -> bool:
+    """Too few pixels for a shape to fit: under 0.2 % of the frame, or under 4."""
+    return shape.sum() < 0.002 * shape.size or shape.sum() < 4
+
+
+def _too_small(shape: np.ndarray) -> str:
+    """Words for a shape (bool, the picture's pixels) that shrinks to too little of the frame."""
+    rows, cols = np.nonzero(shape)
+    across = max(int(np.ptp(rows)), int(np.ptp(cols))) + 1
+    return (
+        f"the shape is too small in its picture ({across} of its {max(shape.shape)} px across): "
+        "crop the picture closer around it"
+    )
 
 
 def load_target(path: str | Path, width: int = 256, height: int = 256, invert: bool | None = None) -> np.ndarray:
@@ -408,7 +429,7 @@ def load_target(path: str | Path, width: int = 256, height: int = 256, invert: b
 def check_target(frame: np.ndarray, name: str = "target") -> None:
     """Refuse shapes a fit cannot use: empty, nearly empty, or filling the frame."""
     share = float(frame.mean())
-    if frame.sum() < 0.002 * frame.size or frame.sum() < 4:
+    if _too_few(frame):
         raise TargetError(
             f"{name}: no shape found (the image looks empty; use --invert if the shape is lighter than the ground)"
         )
