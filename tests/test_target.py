@@ -130,7 +130,9 @@ def test_invert_overrides_the_border_rule(tmp_path, shape):
     assert (inverted ^ expected).sum() <= 0.03 * expected.sum()
 
 
-@pytest.mark.parametrize("case", ["missing", "text", "empty", "noisy-empty", "full", "one-pixel", "truncated"])
+@pytest.mark.parametrize(
+    "case", ["missing", "text", "empty", "noisy-empty", "full", "one-pixel", "truncated", "folder"]
+)
 def test_bad_targets_are_refused(tmp_path, case):
     path = tmp_path / f"{case}.png"
     if case == "text":
@@ -150,9 +152,14 @@ def test_bad_targets_are_refused(tmp_path, case):
     elif case == "truncated":
         iio.imwrite(path, np.where(_shape(), 0, 255).astype(np.uint8))
         path.write_bytes(path.read_bytes()[:60])
+    elif case == "folder":
+        path.mkdir()
     with pytest.raises(TargetError) as err:
         load_target(path, 64, 64)
     assert "\n" not in str(err.value)
+    assert "Error)" not in str(err.value)  # words, not the name of an exception class
+    if case == "folder":
+        assert "is a folder; give one image file" in str(err.value)
 
 
 def test_a_shape_too_small_in_its_picture_is_named_so_not_called_empty(tmp_path):

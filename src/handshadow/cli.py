@@ -12,6 +12,7 @@ import argparse
 import dataclasses
 import logging
 import math
+import os
 import signal
 import sys
 from pathlib import Path
@@ -289,7 +290,9 @@ def _add_fit_options(
     hands_default: str = "auto",
     quality_default: str = "default",
     force_help: str = "write into a non-empty folder",
+    morph: bool = False,
 ) -> None:
+    """The options of a fit, shared by fit, interpolate (``morph``: a fit for each end) and batch."""
     p.add_argument(
         "--hands",
         default=hands_default,
@@ -312,11 +315,18 @@ def _add_fit_options(
         "--time-limit",
         type=float,
         metavar="SECONDS",
-        help="end each fit's search, polish and hops after about this many seconds and finish the best so far"
-        " (its separation and measuring follow; default: no limit)",
+        help=(
+            "end each end's fit, and then the path's smoothing, after about this many seconds each, the best so far"
+            " finished (the separations follow: a morph takes about three times as long; default: no limit)"
+            if morph
+            else "end each fit's search, polish and hops after about this many seconds and finish the best so far"
+            " (its separation and measuring follow; default: no limit)"
+        ),
     )
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of the search's random starts (default 0; attempts use seed+1, ...)"
+    )
     p.add_argument(
         "--attempts",
         type=int,
@@ -331,7 +341,12 @@ def _add_fit_options(
         "within 0.03 of their bars), each attempt's fine stages again from jittered copies, the better kept; about 40 s "
         "each at 256 px, the last weighing where the outline fails the HD95 bar (default: 3 fast, 3 default, 4 best)",
     )
-    p.add_argument("--hand-model", default="anny", choices=["anny", "mano"])
+    p.add_argument(
+        "--hand-model",
+        default="anny",
+        choices=["anny", "mano"],
+        help="anny (default, open and built in) or mano (your own licensed files, with --mano-dir)",
+    )
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl and MANO_LEFT.pkl")
     p.add_argument(
         "--hand-shape",
@@ -342,13 +357,20 @@ def _add_fit_options(
         " up to 10 betas, e.g. 0.5,-1.2; the guide says how long the hands are",
     )
     p.add_argument("--limits", default="anatomical", choices=["anatomical", "paper"], help="joint-limit preset")
-    p.add_argument("--light", default="point", choices=["point", "directional"])
+    p.add_argument(
+        "--light",
+        default="point",
+        choices=["point", "directional"],
+        help="point: a lamp (default); directional: sunlight, parallel rays",
+    )
     p.add_argument(
         "--lamp-distance",
         type=float,
         metavar="M",
-        help="metres from the point lamp to the wall (default 4 with one target, 2 with two; 2 to 5: a farther "
-        "lamp casts the same picture with less perspective, from hands farther from the wall; one target only)",
+        help="metres from the point lamp to the wall (default 4"
+        + ("" if morph else " with one target, 2 with two")
+        + "; 2 to 5: a farther lamp casts the same picture with less perspective, from hands farther from the wall"
+        + (")" if morph else "; one target only)"),
     )
     p.add_argument("--no-forearm", action="store_true", help="hands without forearms")
     p.add_argument(
@@ -424,12 +446,28 @@ def cmd_app(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's one-line errors: the reason and where the help is, not the
+    whole usage block."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("handshadow")
+    except PackageNotFoundError:  # run from a source tree that was not installed
+        return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="handshadow", description="Hand shadows: find, render and morph poses of your hands."
-    )
+    parser = _Parser(prog="handshadow", description="Hand shadows: find, render and morph poses of your hands.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log details")
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument("--version", action="version", version=f"handshadow {_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     p = sub.add_parser("render", help="render a pose file (or a built-in pose) into a result folder")
     p.add_argument("pose", help="pose.json written by 'fit', or the name of a built-in pose")
@@ -449,7 +487,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "target",
         nargs="+",
-        help="an image file (PNG, JPEG, GIF, BMP) or a built-in example name; a second target (SIDE) fits"
+        help="an image file (PNG, JPEG, GIF, BMP, WebP, TIFF) or a built-in example name; a second target (SIDE) fits"
         " one pose whose shadow from a second lamp, turned --view-angle about the hands, matches it",
     )
     p.add_argument(
@@ -474,7 +512,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("b", help="the last target")
     p.add_argument("--frames", type=int, default=30, help="number of frames, ends included (default 30)")
     p.add_argument("--out", help="output folder (default: out/<a>-to-<b>)")
-    _add_fit_options(p, hands_default="2", quality_default="best")  # both ends must be good: a morph is judged by them
+    _add_fit_options(
+        p, hands_default="2", quality_default="best", morph=True
+    )  # both ends must be good: a morph is judged by them
     p.set_defaults(func=cmd_interpolate)
 
     p = sub.add_parser("print", help="a 3D-printable sculpture of a result's hands, on a stand, with the torch's place")
@@ -518,6 +558,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command is None:  # bare `handshadow`: what it can do
+        parser.print_help()
+        return EXIT_USAGE
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
     # A SIGTERM (a job runner's, ``timeout``'s) ends a command as Ctrl-C does: a fit writes its
     # best result so far, a batch keeps its finished targets. Not SIGKILL: nothing can.
@@ -530,6 +573,9 @@ def main(argv: list[str] | None = None) -> int:
     except HandshadowError as exc:
         print(f"handshadow: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:  # the reader went away (`handshadow examples | head -1`): nothing more to say
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        return 0
     finally:
         signal.signal(signal.SIGTERM, on_term)
 

@@ -87,6 +87,8 @@ def read_image(path: str | Path) -> np.ndarray:
     from PIL import Image, ImageOps, UnidentifiedImageError
 
     path = Path(path)
+    if path.is_dir():
+        raise TargetError(f"{path} is a folder; give one image file (handshadow batch fits a folder of them)")
     if not path.is_file():
         raise TargetError(f"target not found: {path} (give an image file or a built-in example name)")
     try:
@@ -99,8 +101,8 @@ def read_image(path: str | Path) -> np.ndarray:
         raise TargetError(f"{path} is too large (more than {MAX_PIXELS // 1_000_000} megapixels)") from None
     except UnidentifiedImageError:
         image = _read_with_imageio(path)  # formats only imageio's plugins know
-    except Exception as exc:  # Pillow raises many kinds for damaged files
-        raise TargetError(f"{path} is not a readable image ({exc.__class__.__name__})") from None
+    except Exception:  # Pillow raises many kinds for damaged files
+        raise TargetError(f"{path} is not a readable image (damaged, or not a picture)") from None
     return _as_rgba(image, path)
 
 
@@ -138,8 +140,8 @@ def _read_with_imageio(path: Path) -> np.ndarray:
         return np.asarray(iio.imread(path, index=0))
     except TargetError:
         raise
-    except Exception as exc:  # imageio raises many kinds for unreadable files
-        raise TargetError(f"{path} is not a readable image ({exc.__class__.__name__})") from None
+    except Exception:  # imageio raises many kinds for unreadable files
+        raise TargetError(f"{path} is not a readable image (not a picture format handshadow reads)") from None
 
 
 def _as_rgba(image: np.ndarray, path: Path) -> np.ndarray:
