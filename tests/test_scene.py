@@ -10,10 +10,12 @@ import torch
 
 from handshadow.scene import (
     FRAME_HEIGHT_M,
+    GRAZING_SHARE,
     LAMP_TO_WALL_M,
     WORKING_EXTENT,
     Scene,
     SceneError,
+    cropped_to_shape,
     default_views,
     frame_height_for,
 )
@@ -80,6 +82,33 @@ def test_the_frame_is_sized_so_that_the_shape_has_the_working_size_on_the_wall(l
     cut[100, 0] = True
     assert frame_height_for([cut], light) is None
     assert frame_height_for([_box(256, 20, 250), cut], light) is None
+
+
+def _grazing(frame_px: int = 256, tip_px: int = 6) -> np.ndarray:
+    """A lens from the frame's left edge to its right, as a picture cropped to it gives: it
+    meets both edges in runs ``tip_px`` long."""
+    rows, cols = np.mgrid[:frame_px, :frame_px]
+    half = (frame_px - 1) / 2
+    return (rows - half) ** 2 / (tip_px / 2 + 40 * (1 - ((cols - half) / half) ** 2)) ** 2 <= 1
+
+
+@pytest.mark.parametrize("light", ["point", "directional"])
+def test_a_shape_cropped_tight_to_its_picture_is_sized_and_one_running_off_is_not(light):
+    lens = _grazing()
+    assert lens[:, 0].sum() == 6 and lens[:, -1].sum() == 6 and not lens[0].any()
+    assert cropped_to_shape(lens)
+    assert frame_height_for([lens], light) == pytest.approx(WORKING_EXTENT * FRAME_HEIGHT_M[light])
+    # Crossing an edge wide, as a forearm's shadow leaving the picture does (9 to 23 % of the
+    # side in bench/recover.py's targets), or meeting one end only, it runs off the frame.
+    assert not cropped_to_shape(_grazing(tip_px=round(GRAZING_SHARE * 256) + 1))
+    one_end = lens.copy()
+    one_end[:, :3] = False
+    assert one_end[:, -1].any() and not cropped_to_shape(one_end)
+    assert frame_height_for([one_end], light) is None
+    arm = _box(256, 40, 200)
+    arm[110:146, :40] = True  # 36 px across the left edge
+    arm[120:124, 200:] = True  # and a thin part grazing the right one
+    assert not cropped_to_shape(arm) and frame_height_for([arm], light) is None
 
 
 @pytest.mark.parametrize("metres", [0.0, -1.0, math.nan, math.inf])

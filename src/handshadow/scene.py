@@ -56,6 +56,11 @@ FRAME_HEIGHT_M = {"point": 0.8, "directional": 0.4}  # a hand's shadow fills abo
 WORKING_EXTENT = 0.715
 FRAME_SIZE_TOLERANCE = 0.05  # a shape within this share of that size keeps the default frame
 FRAME_SCALE_RANGE = (0.25, 4.0)  # the frame's height, times the default, at the most
+# A shape that meets its frame's edge has run off it (a forearm's shadow leaving the picture,
+# each crossing 9 to 23 % of the side in bench/recover.py's targets), unless it meets both
+# ends of one side's span only in short runs, under this share of the side each: then the
+# picture was cropped to the shape, which grazes the edges (frame_height_for).
+GRAZING_SHARE = 0.05
 # Where hands belong, as distances in front of the wall (Scene.placement_range):
 WALL_CLEARANCE_M = 0.03  # the nearest a hand comes to the wall while the search runs
 LAMP_CLEARANCE_M = 0.25  # room kept before the lamp (a point light)
@@ -366,13 +371,15 @@ def frame_height_for(shapes: list[np.ndarray], light: LightType = "point") -> fl
     """The frame's height on the wall (metres) at which the largest of ``shapes`` (each (H, W)
     bool, True in the shape, one frame size) has its longer side WORKING_EXTENT of the default
     frame's height; None (the default frame) when it already has within FRAME_SIZE_TOLERANCE
-    of that size, when a shape runs off the frame (it touches the frame's edge, so its size is
-    not known: a forearm's shadow leaving the picture) or when no shape has a pixel. The
-    frame's scale stays in FRAME_SCALE_RANGE."""
+    of that size, when a shape runs off the frame (it meets the frame's edge, so its size is
+    not known: a forearm's shadow leaving the picture; a shape that only grazes both ends of
+    the frame, a picture cropped to it, does not: :func:`cropped_to_shape`) or when no shape
+    has a pixel. The frame's scale stays in FRAME_SCALE_RANGE."""
     longest = 0
     for shape in shapes:
         shape = np.asarray(shape, bool)
-        if shape[0].any() or shape[-1].any() or shape[:, 0].any() or shape[:, -1].any():
+        meets_edge = shape[0].any() or shape[-1].any() or shape[:, 0].any() or shape[:, -1].any()
+        if meets_edge and not cropped_to_shape(shape):
             return None
         rows, cols = np.nonzero(shape)
         if len(rows):
@@ -384,6 +391,24 @@ def frame_height_for(shapes: list[np.ndarray], light: LightType = "point") -> fl
     if abs(scale - 1.0) <= FRAME_SIZE_TOLERANCE:
         return None
     return FRAME_HEIGHT_M[light] * float(np.clip(scale, *FRAME_SCALE_RANGE))
+
+
+def cropped_to_shape(shape: np.ndarray) -> bool:
+    """Whether a shape (H, W) bool that meets its frame's edge comes from a picture cropped to
+    it: it meets both ends of the rows' or of the columns' span (a crop to its bounding box;
+    a letterboxed picture's other axis has margins), and every run of it along the edge is
+    shorter than GRAZING_SHARE of that edge, where a forearm's shadow running off crosses it
+    wide."""
+    shape = np.asarray(shape, bool)
+    top, bottom, left, right = shape[0], shape[-1], shape[:, 0], shape[:, -1]
+    if not ((top.any() and bottom.any()) or (left.any() and right.any())):
+        return False
+    for edge in (top, bottom, left, right):
+        padded = np.concatenate([[False], edge, [False]]).astype(np.int8)
+        starts, ends = np.flatnonzero(np.diff(padded) == 1), np.flatnonzero(np.diff(padded) == -1)
+        if len(starts) and (ends - starts).max() >= GRAZING_SHARE * len(edge):
+            return False
+    return True
 
 
 def check_lamp_distance(metres: float) -> None:
