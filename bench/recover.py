@@ -93,7 +93,12 @@ def _turn_z_to(axis: np.ndarray) -> np.ndarray:
 
 
 def random_target(
-    rng: np.random.Generator, forearm: bool, tries: int = 200, n_hands: int = 2, shape: dict | None = None
+    rng: np.random.Generator,
+    forearm: bool,
+    tries: int = 200,
+    n_hands: int = 2,
+    shape: dict | None = None,
+    lamp_m: float = FIT_LAMP_TO_WALL_M,
 ) -> tuple[PosedScene, np.ndarray]:
     """A performable pose of ``n_hands`` hands (2: right and left; 1: either) whose shadow lies
     well inside the frame, and the shadow. Performable: no vertex more than 3 mm inside other
@@ -101,11 +106,12 @@ def random_target(
     can hold by the rules every fit keeps (hands.arms: each forearm leads back toward the performer, the elbows within one person's span); the cone the
     forearm is drawn in, tilted by the hand's own turn and the wrist's bend, does not ensure it. ``shape``: the hands' build (Anny phenotypes; None:
     the default hand); a hand k times the default's length (HandRig.size) stands k times as far
-    from the lamp, so the draws, and the shadows' sizes, are those of the default hand."""
-    scene = Scene.default(SIZE, SIZE, lamp_to_wall_m=FIT_LAMP_TO_WALL_M)  # the lamp a default fit uses
+    from the lamp, so the draws, and the shadows' sizes, are those of the default hand.
+    ``lamp_m``: the lamp's distance from the wall (default: the one a default fit uses)."""
+    scene = Scene.default(SIZE, SIZE, lamp_to_wall_m=lamp_m)
     lamp = np.asarray(scene.light.position)
     for _ in range(tries):
-        depth = rng.uniform(*DEPTH_M) * FIT_LAMP_TO_WALL_M / LAMP_TO_WALL_M  # the same sizes of shadow
+        depth = rng.uniform(*DEPTH_M) * lamp_m / LAMP_TO_WALL_M  # the same sizes of shadow
         middle = lamp + np.array([rng.normal(0, 0.04), rng.normal(0, 0.04), -depth])
         offset = rng.normal(0, 1, 3) * np.array([1.0, 0.6, 0.3])
         offset *= rng.uniform(0.06, MAX_WRIST_GAP_M / 2) / np.linalg.norm(offset)
@@ -152,6 +158,14 @@ def main() -> None:
         help="the build of the hands that cast the targets (handshadow fit --hand-shape, Anny), e.g."
         " weight=0.8,muscle=0.8; the fit keeps the default hand",
     )
+    parser.add_argument(
+        "--target-lamp",
+        type=float,
+        default=FIT_LAMP_TO_WALL_M,
+        metavar="M",
+        help=f"the lamp that casts the targets, metres from the wall (default {FIT_LAMP_TO_WALL_M:g}, a default"
+        " fit's own); the fit keeps its default lamp",
+    )
     args = parser.parse_args()
     try:
         part, parts = (int(x) for x in args.part.split("/"))
@@ -169,13 +183,15 @@ def main() -> None:
     forearm = not args.no_forearm
     kind = "two-hand" if args.hands == 2 else "one-hand"
     build = f", cast by hands of {args.target_shape}" if shape else ""
+    if args.target_lamp != FIT_LAMP_TO_WALL_M:
+        build += f", cast from a lamp {args.target_lamp:g} m from the wall"
     print(f"{args.n} random {kind} poses, forearm={forearm}, seed={args.seed}, quality={args.quality}{build}")
     print(
         f"{'target':10s} {'IoU':>6s} {'HD95':>6s} {'thin':>5s} {'ok':>3s} {'pen':>5s} {'hold':>4s} {'hands':>5s} {'s':>6s}"
     )
     rows = []
     for k in range(args.n):
-        truth, target = random_target(rng, forearm, n_hands=args.hands, shape=shape)
+        truth, target = random_target(rng, forearm, n_hands=args.hands, shape=shape, lamp_m=args.target_lamp)
         if k % parts != part:
             continue
         name = f"pose{k:02d}"
