@@ -46,7 +46,7 @@ MAX_UPLOAD = "8mb"
 DEFAULT_QUALITY = "default"  # FitConfig.quality (a test holds them equal)
 QUALITY_HELP = (
     "default: about half a minute, up to about 7 minutes for a shape it cannot reach, as the command line;"
-    " fast: about 14 s, a rough first look that matches three in five shapes (longer on a near miss);"
+    " fast: about 14 s, a rough first look that matches three in five shapes (up to about 4 minutes on a near miss);"
     " best: longer (a 2-core CPU)"
 )
 INSTALL_HINT = "the app needs Gradio, an optional extra: pip install 'handshadow[app]'"

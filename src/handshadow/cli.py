@@ -308,7 +308,7 @@ def _add_fit_options(
         choices=["fast", "default", "best"],
         help=f"search effort (default: {quality_default}); on a 2-core CPU a two-hand fit takes about 14 s fast"
         " (short attempts: a rough look, three in five HSP shapes pass; a far miss ends after one,"
-        " a near miss hops and tries again, up to about 3 min), default about 30 s when its first"
+        " a near miss hops and tries again, up to about 4 min), default about 30 s when its first"
         " attempt passes and up to about 7 min when every attempt fails, best longer",
     )
     p.add_argument(
