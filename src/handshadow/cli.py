@@ -512,9 +512,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("b", help="the last target")
     p.add_argument("--frames", type=int, default=30, help="number of frames, ends included (default 30)")
     p.add_argument("--out", help="output folder (default: out/<a>-to-<b>)")
-    _add_fit_options(
-        p, hands_default="2", quality_default="best", morph=True
-    )  # both ends must be good: a morph is judged by them
+    # Both ends must be good: a morph is judged by them.
+    _add_fit_options(p, hands_default="2", quality_default="best", morph=True)
     p.set_defaults(func=cmd_interpolate)
 
     p = sub.add_parser("print", help="a 3D-printable sculpture of a result's hands, on a stand, with the torch's place")
