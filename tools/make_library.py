@@ -10,6 +10,8 @@ Wrist: (flexion toward the palm, deviation toward the thumb) degrees.
 
 Run:  .venv/bin/python tools/make_library.py
       .venv/bin/python tools/make_library.py --fix-arms   (only lead back forearms that do not)
+      .venv/bin/python tools/make_library.py --fix-depth  (only part hands and fingers that pass
+                                                           into each other, by the exact mesh test)
 """
 
 from __future__ import annotations
@@ -540,6 +542,32 @@ def fix_arms() -> None:
         print(f"{path.stem:10s} forearms led back: holdable {problem.holdable(fixed)[0]}, shadow IoU {iou:.3f}")
 
 
+def fix_depth() -> None:
+    """Part the hands and fingers of the library's poses that pass into each other deeper than
+    the performable tolerance by the exact mesh test (metrics.md; a fit's separation, then the
+    polish toward the pose's own shadow), keeping the rest of their files; the poses that pass
+    stay byte for byte."""
+    from handshadow.search import polish, separate
+    from handshadow.search.config import Finishing
+
+    tolerance = Finishing().tolerance_mm
+    for path in sorted(LIBRARY.glob("*.json")):
+        data = json.loads(path.read_text())
+        target, problem, poses = _problem_of(data)
+        before = problem.mesh_penetration(poses)[0].deepest_mm
+        if before <= tolerance:
+            continue
+        fixed = polish(problem, separate(problem, poses), rounds=3, always=True)
+        after = problem.mesh_penetration(fixed)[0].deepest_mm
+        shadow = problem.shadows(fixed)[0].numpy() > 0.5
+        iou = float((shadow & target).sum() / (shadow | target).sum())
+        for h, batch in zip(data["hands"], fixed.hands):
+            h.update(batch.to_hand_poses(h["side"], h["model"])[0].to_json())
+        path.write_text(json.dumps(data, indent=1) + "\n")
+        held = problem.holdable(fixed)[0]
+        print(f"{path.stem:10s} penetration {before:.1f} -> {after:.1f} mm, arms holdable {held}, shadow IoU {iou:.3f}")
+
+
 if __name__ == "__main__":
     import sys
 
@@ -551,6 +579,9 @@ if __name__ == "__main__":
 
     if sys.argv[1:] == ["--fix-arms"]:
         fix_arms()
+        raise SystemExit
+    if sys.argv[1:] == ["--fix-depth"]:
+        fix_depth()
         raise SystemExit
     LIBRARY.mkdir(parents=True, exist_ok=True)
     scene = Scene.default(192, 192)
