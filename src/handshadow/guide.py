@@ -182,7 +182,9 @@ def wrapped(lines: Sequence[str], width_px: int, font) -> list[str]:
 
 def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) -> np.ndarray:
     """The performer's view on the left, the shadow over the target as an inset, and the
-    instructions below. All uint8 RGB."""
+    instructions below. All uint8 RGB. The inset sits in the view's top right corner where
+    that corner is empty (the view's white), else beside the view, so it never hides a hand
+    or a forearm."""
     from PIL import Image, ImageDraw, ImageFont
 
     h, w = view.shape[:2]
@@ -190,23 +192,22 @@ def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) 
         (w // 3, w // 3 * shadow_overlay.shape[0] // shadow_overlay.shape[1])
     )
     font = ImageFont.load_default()
-    lines = wrapped(lines, w - 20, font)
-    text_h = 18 * (len(lines) + 2)
-    canvas = Image.new("RGB", (w, h + text_h), "white")
-    canvas.paste(Image.fromarray(view), (0, 0))
-    canvas.paste(inset, (w - inset.width - 6, 6))
-    draw = ImageDraw.Draw(canvas)
-    draw.rectangle([w - inset.width - 7, 5, w - 6, 6 + inset.height], outline=(120, 120, 120))
-    draw.text((8, 6), "What you see from behind the lamp", fill=(40, 40, 40), font=font)
-    # The label sits on the performer's view under the inset: on a white band, so a hand
-    # reaching under the inset does not run through the words.
     label = "shadow vs target"
-    at = (
-        max(8, min(w - inset.width - 6, w - 8 - draw.textlength(label, font=font))),
-        inset.height + 10,
-    )  # small views too
-    x0, y0, x1, y1 = draw.textbbox(at, label, font=font)
-    draw.rectangle([x0 - 2, y0 - 1, x1 + 2, y1 + 1], fill="white")
+    label_w = int(np.ceil(font.getlength(label)))
+    # The corner the inset and its label would cover, with the gap around them.
+    corner = view[: inset.height + 26, max(0, w - max(inset.width, label_w) - 14) :]
+    beside = bool((corner < 250).any(axis=-1).any())
+    width = w + inset.width + 12 if beside else w
+    lines = wrapped(lines, width - 20, font)
+    text_h = 18 * (len(lines) + 2)
+    canvas = Image.new("RGB", (width, h + text_h), "white")
+    canvas.paste(Image.fromarray(view), (0, 0))
+    x = width - inset.width - 6
+    canvas.paste(inset, (x, 6))
+    draw = ImageDraw.Draw(canvas)
+    draw.rectangle([x - 1, 5, width - 6, 6 + inset.height], outline=(120, 120, 120))
+    draw.text((8, 6), "What you see from behind the lamp", fill=(40, 40, 40), font=font)
+    at = (max(8, min(x, width - 8 - label_w)), inset.height + 10)  # small views too
     draw.text(at, label, fill=(90, 90, 90), font=font)
     y = h + 8
     for line in lines:

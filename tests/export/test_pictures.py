@@ -28,20 +28,30 @@ def test_the_performer_view_shows_all_of_a_forearm_that_reaches_toward_the_lamp(
     assert distance > 0.4  # beyond the forearm's near end, 0.42 m from the centre along z
 
 
-def test_the_guide_writes_the_inset_label_on_white_over_a_hand_under_it():
-    # A performer's view dark all over (a hand reaching under the inset): the label under the
-    # inset is still drawn on white, so it reads. Before, its letters ran through the hand.
+def test_the_guides_inset_never_covers_the_hands():
+    # A hand reaching into the view's top right corner: the inset (the shadow over the target)
+    # and its label go beside the view instead, which is left whole. Before, the inset sat
+    # over the corner and hid part of a forearm.
     from handshadow.guide import guide_image
 
-    view = np.full((300, 300, 3), 120, np.uint8)
+    view = np.full((300, 300, 3), 255, np.uint8)
+    view[20:60, 250:290] = 120  # a fingertip in the corner
     overlay = np.full((64, 64, 3), 200, np.uint8)
     picture = guide_image(view, overlay, ["Left hand: fingers up."])
-    inset_w = 300 // 3
-    band = picture[inset_w + 10 : inset_w + 20, 300 - inset_w - 6 : 300 - 6]
-    assert (band == 255).all(axis=2).mean() > 0.25  # white around the letters (before: none)
-    assert (band < 150).all(axis=2).any()  # and the letters are there
-    below = picture[inset_w + 40 : inset_w + 60, 300 - inset_w - 6 : 300 - 6]
-    assert (below == 120).all()  # the view itself is left as it is below the label
+    assert picture.shape[1] == 300 + 300 // 3 + 12  # a column beside the view
+    assert (picture[20:300, :300] == view[20:]).all()  # the view as it was (below its title), fingertip and all
+    column = picture[:300, 300:]
+    assert (column == 200).all(axis=2).sum() >= 0.9 * (300 // 3) ** 2  # the inset is there
+    label = column[300 // 3 + 8 : 300 // 3 + 24]
+    assert (label < 150).all(axis=2).any()  # and its label under it
+
+    # With the corner empty the inset sits in it, and the picture keeps the view's width.
+    view[20:60, 250:290] = 255
+    view[150:290, 100:200] = 120  # the hands lower down
+    picture = guide_image(view, overlay, ["Left hand: fingers up."])
+    assert picture.shape[1] == 300
+    assert (picture[10 : 300 // 3, 300 - 300 // 3 : 294] == 200).all(axis=2).mean() > 0.9
+    assert (picture[150:290, 100:200] == 120).all()
 
 
 def test_the_inset_label_stays_whole_on_a_small_view():
@@ -49,8 +59,9 @@ def test_the_inset_label_stays_whole_on_a_small_view():
     # to stay inside the picture instead of running off its edge.
     from handshadow.guide import guide_image
 
-    view = np.full((200, 200, 3), 120, np.uint8)
+    view = np.full((200, 200, 3), 255, np.uint8)
     picture = guide_image(view, np.full((64, 64, 3), 200, np.uint8), ["Left hand: fingers up."])
+    assert picture.shape[1] == 200
     rows = picture[200 // 3 + 8 : 200 // 3 + 24, :200]
-    assert (rows[:, -4:] == 120).all()  # the band and its letters end before the edge
-    assert (rows == 255).all(axis=2).mean(axis=0).max() > 0.5 and (rows < 100).all(axis=2).any()
+    assert (rows[:, -4:] == 255).all()  # the letters end before the edge
+    assert (rows < 100).all(axis=2).any()
