@@ -106,6 +106,21 @@ def test_directional_light_scene_reproduces_too(tmp_path):
     assert (shadow != recompute_shadow(tmp_path / "out")).sum() <= 2
 
 
+def test_a_classic_hand_shadow_renders_by_name_with_how_to_hold_it(tmp_path, capsys):
+    # The library's classic poses (handshadow examples lists them) render by name; the folder
+    # has a guide (the hands as the performer sees them, the shadow, the instructions) and the
+    # command says how to hold the hands.
+    out = tmp_path / "bird"
+    assert main(["render", "bird", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "Can be held: yes." in said
+    assert "Left hand: fingers point" in said and "Right hand: fingers point" in said
+    guide = iio.imread(out / "guide.png")
+    assert guide.shape[0] > 560 and guide.std() > 10
+    shadow = iio.imread(out / "shadow.png") < 128
+    assert (shadow != recompute_shadow(out)).sum() <= 2
+
+
 def test_pose_file_round_trips(rendered, tmp_path):
     assert main(["render", str(rendered / "pose.json"), "--out", str(tmp_path / "again")]) == 0
     assert np.array_equal(iio.imread(rendered / "shadow.png"), iio.imread(tmp_path / "again" / "shadow.png"))

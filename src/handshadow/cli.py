@@ -34,9 +34,12 @@ def cmd_render(args: argparse.Namespace) -> int:
         posed = _held_by(posed, args.hand_shape, args.mano_dir)
     from handshadow.pipeline import render_to_folder, view_name
 
-    out, holding = render_to_folder(posed, args.out, force=args.force, mano_dir=args.mano_dir)
+    out, holding, lines = render_to_folder(posed, args.out, force=args.force, mano_dir=args.mano_dir)
     shadows = " ".join(view_name("shadow", k, len(posed.views)) for k in range(len(posed.views)))
-    print(f"wrote {out}/: {shadows} scene.png scene.json hands.glb " + " ".join(f"{h.side}.obj" for h in posed.hands))
+    guide = " guide.png" if len(posed.views) == 1 else ""
+    hands = " ".join(f"{h.side}.obj" for h in posed.hands)
+    print(f"wrote {out}/: {shadows} scene.png scene.json hands.glb {hands}{guide}")
+    print("\n".join(lines))
     print(holding)
     return 0
 
@@ -67,6 +70,9 @@ def cmd_examples(args: argparse.Namespace) -> int:
         print(f"  {name:14s} {about}")
     print("Built-in poses (handshadow render NAME --out DIR):")
     for name, about in examples.list_poses():
+        print(f"  {name:14s} {about}")
+    print("Classic hand shadows, each with how to hold it (handshadow render NAME --out DIR):")
+    for name, about in examples.list_poses(examples.LIBRARY):
         print(f"  {name:14s} {about}")
     return 0
 

@@ -1,5 +1,6 @@
-"""Built-in examples shipped with the package: poses (data/poses/*.json) and target shadows
-(data/examples/*.png, our own renders of library poses, so each has a known answer)."""
+"""Built-in examples shipped with the package: poses (data/poses/*.json, and the library's
+classic hand shadows, data/library/*.json) and target shadows (data/examples/*.png, our own
+renders of library poses, so each has a known answer)."""
 
 from __future__ import annotations
 
@@ -10,12 +11,14 @@ from handshadow.paths import PACKAGE_DATA
 
 POSES = PACKAGE_DATA / "poses"
 TARGETS = PACKAGE_DATA / "examples"
+LIBRARY = PACKAGE_DATA / "library"  # the classic hand shadows (library.py), also the search's starts
 
 
-def list_poses() -> list[tuple[str, str]]:
-    """(name, one-line description) of every built-in pose."""
+def list_poses(folder: Path = POSES) -> list[tuple[str, str]]:
+    """(name, one-line description) of every built-in pose in ``folder``: POSES, or LIBRARY
+    for the classic hand shadows."""
     out = []
-    for path in sorted(POSES.glob("*.json")):
+    for path in sorted(folder.glob("*.json")):
         about = json.loads(path.read_text()).get("about", "")
         out.append((path.stem, about))
     return out
@@ -23,12 +26,16 @@ def list_poses() -> list[tuple[str, str]]:
 
 def pose_path(name_or_path: str) -> Path:
     """A pose file path: an existing file, else the built-in pose of that name, else the
-    given path (whose absence the loader reports)."""
+    classic hand shadow of that name (LIBRARY), else the given path (whose absence the
+    loader reports)."""
     path = Path(name_or_path)
     if path.exists():
         return path
-    builtin = POSES / f"{name_or_path}.json"
-    return builtin if builtin.is_file() else path
+    for folder in (POSES, LIBRARY):
+        builtin = folder / f"{name_or_path}.json"
+        if builtin.is_file():
+            return builtin
+    return path
 
 
 def list_targets() -> list[tuple[str, str]]:

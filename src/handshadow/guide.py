@@ -180,9 +180,12 @@ def wrapped(lines: Sequence[str], width_px: int, font) -> list[str]:
     return out
 
 
-def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) -> np.ndarray:
-    """The performer's view on the left, the shadow over the target as an inset, and the
-    instructions below. All uint8 RGB. The inset sits in the view's top right corner where
+def guide_image(
+    view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str], label: str = "shadow vs target"
+) -> np.ndarray:
+    """The performer's view on the left, the shadow over the target as an inset (``label``
+    under it; a rendered pose's guide shows its shadow alone), and the instructions below.
+    All uint8 RGB. The inset sits in the view's top right corner where
     that corner is empty (the view's white), else beside the view, so it never hides a hand
     or a forearm."""
     from PIL import Image, ImageDraw, ImageFont
@@ -192,7 +195,6 @@ def guide_image(view: np.ndarray, shadow_overlay: np.ndarray, lines: list[str]) 
         (w // 3, w // 3 * shadow_overlay.shape[0] // shadow_overlay.shape[1])
     )
     font = ImageFont.load_default()
-    label = "shadow vs target"
     label_w = int(np.ceil(font.getlength(label)))
     # The corner the inset and its label would cover, with the gap around them.
     corner = view[: inset.height + 26, max(0, w - max(inset.width, label_w) - 14) :]

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import json
 
-from handshadow.paths import PACKAGE_DATA
+from handshadow.examples import LIBRARY
 from handshadow.posefile import parse_pose
 from handshadow.poses import PosedScene
 
-LIBRARY = PACKAGE_DATA / "library"
+__all__ = ["LIBRARY", "library_about", "library_names", "load_library_pose"]
 
 
 def library_names() -> list[str]:

@@ -261,20 +261,27 @@ def result_lines(result: FitResult) -> list[str]:
 
 def render_to_folder(
     posed: PosedScene, out: str | Path, force: bool = False, mano_dir: str | None = None
-) -> tuple[Path, str]:
+) -> tuple[Path, str, list[str]]:
     """Render a pose file into ``out``: shadow.png (shadow_K.png per view when the file has
-    several), scene.json, <side>.obj, hands.glb, scene.png. Returns the folder and whether a
-    person can hold the pose, in a line (guide.holding_line)."""
+    several), scene.json, <side>.obj, hands.glb, scene.png, and with one view guide.png (the
+    hands as the performer sees them, the shadow, how to hold the hands). Returns the folder,
+    whether a person can hold the pose in a line (guide.holding_line) and how to hold the
+    hands (guide.describe)."""
     meshes, masks = cast_shadows(posed, mano_dir)
     models = hand_models(posed, mano_dir)
     pen = pose_penetration(posed, meshes, models=models)
     beyond = [beyond_limits(h.pose_deg, h.wrist_deg if posed.forearm else None, h.side) for h in posed.hands]
     sides = [h.side for h in posed.hands]
     holding = holding_line(sides, pen.between_mm, arm_check(posed, models=models), pen.within_mm, beyond)
+    lines = describe(list(posed.hands), posed.scene, hand_length_m(models[0].rig), len(posed.views))
     with ResultFolder(out, force) as folder:
         write_scene_files(folder, posed.views, meshes, masks)
         write_json(folder / "pose.json", posed.to_json())
-        return folder.commit(), holding
+        if len(posed.views) == 1:
+            view = performer_view(posed.scene, [(m.side, m.vertices, m.faces) for m in meshes], size=(560, 560))
+            shadow = np.repeat(shadow_image(masks[0])[..., None], 3, axis=2)
+            write_png(folder / "guide.png", guide_image(view, shadow, [holding, *lines], label="shadow"))
+        return folder.commit(), holding, lines
 
 
 def interpolate_to_folder(
