@@ -54,3 +54,17 @@ def test_a_reader_that_goes_away_ends_the_listing_quietly():
     finally:
         os.close(write_end)
     assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+def test_a_folder_named_like_a_built_in_does_not_hide_it(tmp_path, monkeypatch):
+    # `handshadow render rabbit --out rabbit`, then again with --force: the folder the first
+    # run made must not stand for the pose (before: "pose file not found: rabbit"), nor for
+    # the built-in target of that name.
+    from handshadow import examples
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["render", "rabbit", "--out", "rabbit"]) == 0
+    assert main(["render", "rabbit", "--out", "rabbit", "--force"]) == 0
+    assert examples.pose_path("rabbit") == examples.LIBRARY / "rabbit.json"
+    assert examples.target_path("rabbit") == examples.TARGETS / "rabbit.png"
+    assert (tmp_path / "rabbit" / "shadow.png").is_file()

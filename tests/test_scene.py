@@ -109,6 +109,15 @@ def test_a_shape_cropped_tight_to_its_picture_is_sized_and_one_running_off_is_no
     arm[110:146, :40] = True  # 36 px across the left edge
     arm[120:124, 200:] = True  # and a thin part grazing the right one
     assert not cropped_to_shape(arm) and frame_height_for([arm], light) is None
+    # Two thin forearms leaving through the bottom corners split each crossing between two
+    # edges, every run under GRAZING_SHARE: they still run off the frame.
+    corners = np.zeros((256, 256), bool)
+    corners[80:140, 100:156] = True
+    for r in range(140, 256):  # 10 px bands from the body down into both bottom corners
+        c = round(100 - (r - 140) * 100 / 115)
+        corners[r, max(0, c - 5) : c + 5] = corners[r, 255 - c - 4 : min(256, 255 - c + 6)] = True
+    assert corners[-1, 0] and corners[-1, -1] and corners[0].sum() == 0
+    assert not cropped_to_shape(corners) and frame_height_for([corners], light) is None
 
 
 @pytest.mark.parametrize("metres", [0.0, -1.0, math.nan, math.inf])

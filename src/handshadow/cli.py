@@ -38,8 +38,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     shadows = " ".join(view_name("shadow", k, len(posed.views)) for k in range(len(posed.views)))
     guide = " guide.png" if len(posed.views) == 1 else ""
     hands = " ".join(f"{h.side}.obj" for h in posed.hands)
-    print(f"wrote {out}/: {shadows} scene.png scene.json hands.glb {hands}{guide}")
-    print("\n".join(lines))
+    print(f"wrote {out}/: {shadows} scene.png scene.json pose.json hands.glb {hands}{guide}")
+    for line in lines:
+        print(line)
     print(holding)
     return 0
 

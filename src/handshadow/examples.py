@@ -27,9 +27,10 @@ def list_poses(folder: Path = POSES) -> list[tuple[str, str]]:
 def pose_path(name_or_path: str) -> Path:
     """A pose file path: an existing file, else the built-in pose of that name, else the
     classic hand shadow of that name (LIBRARY), else the given path (whose absence the
-    loader reports)."""
+    loader reports). A folder of that name (an earlier render's --out, say) does not hide
+    the built-in pose."""
     path = Path(name_or_path)
-    if path.exists():
+    if path.is_file():
         return path
     for folder in (POSES, LIBRARY):
         builtin = folder / f"{name_or_path}.json"
@@ -48,9 +49,10 @@ def list_targets() -> list[tuple[str, str]]:
 
 
 def target_path(name_or_path: str) -> Path:
-    """An image path: an existing file, else the built-in target of that name, else the path."""
+    """An image path: an existing file, else the built-in target of that name, else the path
+    (a folder of that name, an earlier fit's --out say, does not hide the built-in target)."""
     path = Path(name_or_path)
-    if path.exists():
+    if path.is_file():
         return path
     builtin = TARGETS / f"{name_or_path}.png"
     return builtin if builtin.is_file() else path

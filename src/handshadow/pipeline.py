@@ -263,7 +263,7 @@ def render_to_folder(
     posed: PosedScene, out: str | Path, force: bool = False, mano_dir: str | None = None
 ) -> tuple[Path, str, list[str]]:
     """Render a pose file into ``out``: shadow.png (shadow_K.png per view when the file has
-    several), scene.json, <side>.obj, hands.glb, scene.png, and with one view guide.png (the
+    several), scene.json, pose.json, <side>.obj, hands.glb, scene.png, and with one view guide.png (the
     hands as the performer sees them, the shadow, how to hold the hands). Returns the folder,
     whether a person can hold the pose in a line (guide.holding_line) and how to hold the
     hands (guide.describe)."""

@@ -398,10 +398,13 @@ def cropped_to_shape(shape: np.ndarray) -> bool:
     it: it meets both ends of the rows' or of the columns' span (a crop to its bounding box;
     a letterboxed picture's other axis has margins), and every run of it along the edge is
     shorter than GRAZING_SHARE of that edge, where a forearm's shadow running off crosses it
-    wide."""
+    wide. A shape in a corner of the frame runs off there (a forearm leaving through the
+    corner splits its crossing between two edges), whatever its runs."""
     shape = np.asarray(shape, bool)
     top, bottom, left, right = shape[0], shape[-1], shape[:, 0], shape[:, -1]
     if not ((top.any() and bottom.any()) or (left.any() and right.any())):
+        return False
+    if shape[0, 0] or shape[0, -1] or shape[-1, 0] or shape[-1, -1]:
         return False
     for edge in (top, bottom, left, right):
         padded = np.concatenate([[False], edge, [False]]).astype(np.int8)

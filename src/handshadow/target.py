@@ -413,10 +413,22 @@ def _too_few(shape: np.ndarray) -> bool:
     return shape.sum() < 0.002 * shape.size or shape.sum() < 4
 
 
+# A shape at least this share of its picture across that still shrinks to too little of the
+# frame is drawn in lines too thin, not small: cropping would not help.
+THIN_LINES_SHARE = 0.3
+
+
 def _too_small(shape: np.ndarray) -> str:
-    """Words for a shape (bool, the picture's pixels) that shrinks to too little of the frame."""
+    """Words for a shape (bool, the picture's pixels) that shrinks to too little of the frame:
+    a small shape in a big picture is to be cropped closer, an outline or line drawing that
+    spans its picture to be filled or drawn thicker."""
     rows, cols = np.nonzero(shape)
     across = max(int(np.ptp(rows)), int(np.ptp(cols))) + 1
+    if across >= THIN_LINES_SHARE * max(shape.shape):
+        return (
+            f"the shape's lines are too thin ({int(shape.sum())} px in all across {across} px): fill the"
+            " shape, or draw it with thicker lines (a shadow target is a filled silhouette)"
+        )
     return (
         f"the shape is too small in its picture ({across} of its {max(shape.shape)} px across): "
         "crop the picture closer around it"

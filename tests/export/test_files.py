@@ -95,3 +95,29 @@ def test_a_place_where_no_folder_can_be_made_is_refused_before_the_work(tmp_path
 def test_a_folder_without_room_for_entries_is_refused_before_the_work():
     with pytest.raises(OutputError, match=r"cannot write to /proc/handshadow/res: no folder can be made in /proc \("):
         ResultFolder("/proc/handshadow/res")  # /proc takes no new entries, even from root
+
+
+@pytest.mark.parametrize("out", [".", "", "..", "/"])
+def test_the_current_folder_or_one_above_it_is_refused_as_an_output(tmp_path, monkeypatch, out):
+    # A result folder is swapped in by rename, which the current folder (or a folder holding
+    # it) cannot be: '--out .' used to fail with a traceback after the whole fit.
+    (tmp_path / "work").mkdir()
+    (tmp_path / "work" / "notes.txt").write_text("mine")
+    monkeypatch.chdir(tmp_path / "work")
+    with pytest.raises(OutputError, match="holds the current folder"):
+        ResultFolder(out, force=True)
+    assert sorted(p.name for p in (tmp_path / "work").iterdir()) == ["notes.txt"]
+
+
+def test_a_file_joining_a_result_joins_a_manifest_without_its_last_newline(tmp_path):
+    # A MANIFEST edited by hand may lack its last newline: the joining file's name goes on a
+    # line of its own, so both names stay listed (and go with the result on --force).
+    res = tmp_path / "res"
+    with ResultFolder(res) as folder:
+        (folder / "shadow.png").write_text("s")
+        folder.commit()
+    (res / MANIFEST).write_text("shadow.png")
+    with StagedFiles([res / "print.stl"]) as files:
+        files["print.stl"].write_text("p")
+        files.commit()
+    assert (res / MANIFEST).read_text().splitlines() == ["shadow.png", "print.stl"]

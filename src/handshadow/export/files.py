@@ -39,6 +39,10 @@ class ResultFolder:
 
     def __init__(self, path: str | Path, force: bool = False):
         self.path = Path(path)
+        here = Path.cwd().resolve()
+        whole = self.path.resolve()
+        if whole == here or whole in here.parents:  # '.', '', '..', a root: swapped by rename, never
+            raise OutputError(f"output folder '{path}' holds the current folder: give a folder of its own (--out NAME)")
         if self.path.exists() and not self.path.is_dir():
             raise OutputError(f"output path {self.path} exists and is not a folder")
         if self.path.is_dir() and any(self.path.iterdir()) and not force:
@@ -121,8 +125,9 @@ class StagedFiles:
         for path in self.paths:  # files joining a result folder join its MANIFEST too
             manifest = path.parent / MANIFEST
             if manifest.is_file() and path.name not in _listed(path.parent):
+                text = manifest.read_text(errors="replace")
                 with manifest.open("a") as f:
-                    f.write(f"{path.name}\n")
+                    f.write(("\n" if text and not text.endswith("\n") else "") + f"{path.name}\n")
         return self.paths
 
     def __exit__(self, *exc) -> None:
