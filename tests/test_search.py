@@ -117,7 +117,9 @@ def test_parameters_stay_within_the_limits_whatever_the_step():
 
 
 def test_separate_parts_hands_that_pass_through_each_other_and_keeps_the_shadow():
-    target, truth = known_target("bird", SIZE)  # the library's bird: palms 18 mm into each other
+    target, truth = known_target(
+        "bird-inside", SIZE
+    )  # the library's bird before 2026-12-07: palms 18 mm into each other
     problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
     poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
     assert problem.mesh_penetration(poses)[0].between_mm > 10
@@ -129,7 +131,7 @@ def test_separate_parts_hands_that_pass_through_each_other_and_keeps_the_shadow(
 
 
 def test_separate_opens_a_fist_curled_into_its_palm():
-    target, truth = known_target("rabbit", SIZE)  # ring and little finger 12 mm into the palm
+    target, truth = known_target("rabbit-inside", SIZE)  # ring and little finger 12 mm into the palm
     problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
     poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
     assert problem.mesh_penetration(poses)[0].within_mm[0] > 10
@@ -139,7 +141,9 @@ def test_separate_opens_a_fist_curled_into_its_palm():
 
 
 def test_a_stage_that_layers_its_hypotheses_refits_the_shadow_with_the_hands_apart():
-    target, truth = known_target("bird", SIZE)  # the library's bird: palms 18 mm into each other
+    target, truth = known_target(
+        "bird-inside", SIZE
+    )  # the library's bird before 2026-12-07: palms 18 mm into each other
     problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
     inside = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
     refit = Stage(
@@ -157,7 +161,7 @@ def test_a_stage_that_layers_its_hypotheses_refits_the_shadow_with_the_hands_apa
 
 def test_a_fit_whose_search_ends_in_penetration_comes_out_apart(monkeypatch):
     result, calls = _fit_ending_inside(monkeypatch)
-    target, _ = known_target("bird", SIZE)
+    target, _ = known_target("bird-inside", SIZE)
     assert calls and calls[0][0] > 10  # the search's result had the hands inside each other
     assert result.penetration.deepest_mm <= 3.0 and result.penetration.performable()
     assert result.posed.fit["penetration_mm"] == round(result.penetration.deepest_mm, 2)
@@ -479,7 +483,7 @@ def _fit_ending_inside(monkeypatch, stop=None, ctrl_c=False):
     ``ctrl_c``: Ctrl-C at the separation's first step."""
     from handshadow import fit as fit_module
 
-    target, truth = known_target("bird", SIZE)
+    target, truth = known_target("bird-inside", SIZE)
     inside = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
     real_search, real_separate, calls = fit_module.run_stages, fit_module.separate, []
 
