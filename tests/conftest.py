@@ -51,3 +51,23 @@ def random_rotation(rng: np.random.Generator, max_deg: float = 60.0) -> torch.Te
     axis /= np.linalg.norm(axis)
     angle = np.radians(rng.uniform(0, max_deg))
     return roma.rotvec_to_rotmat(torch.as_tensor(axis * angle)[None])
+
+
+def run_cli(args: list[str]):
+    """``handshadow ARGS`` in this process, its output captured: a CompletedProcess
+    (returncode, stdout, stderr). For the many checks of input a command refuses before any
+    work: each saves a Python start-up and torch's import (about 3 s here). Each command's
+    refusals are also checked in a process of their own, as a user meets them."""
+    import contextlib
+    import io
+    import subprocess
+
+    from handshadow.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(list(args))
+        except SystemExit as exc:  # argparse's own refusals
+            code = exc.code if isinstance(exc.code, int) else 1
+    return subprocess.CompletedProcess(["handshadow", *args], code, out.getvalue(), err.getvalue())

@@ -24,6 +24,7 @@ import pytest
 from handshadow.batch import BatchError, Target, find_targets, is_complete, make_plan, record, run_batch
 from handshadow.examples import TARGETS
 from handshadow.fit import FitConfig
+from tests.conftest import run_cli
 
 PY = [sys.executable, "-m", "handshadow.cli"]
 NAMES = ("dog", "duck", "rabbit", "swan")
@@ -260,11 +261,19 @@ def test_bad_inputs_and_options_fail_cleanly(tmp_path, args, message):
         (tmp_path / sub / "dog.png").write_bytes((TARGETS / "dog.png").read_bytes())
     out = tmp_path / "out"
     argv = [a.replace("{tmp}", str(tmp_path)) for a in args]
-    res = subprocess.run(PY + ["batch", *argv, "--out", str(out)], capture_output=True, text=True)
+    res = run_cli(["batch", *argv, "--out", str(out)])
     assert res.returncode == 2, res.stderr
     assert res.stderr.startswith("handshadow: error: ") and res.stderr.count("\n") == 1, res.stderr
     assert message in res.stderr
     assert not out.exists() or not any(p.is_dir() for p in out.iterdir())  # no result folder, whole or half
+
+
+def test_a_refusal_ends_the_process_itself_with_one_line(tmp_path):
+    """The refusals above run in this process; one runs as a user meets it."""
+    out = tmp_path / "out"
+    res = subprocess.run(PY + ["batch", "dog", "--workers", "0", "--out", str(out)], capture_output=True, text=True)
+    assert res.returncode == 2 and res.stderr == "handshadow: error: --workers must be positive, got 0\n", res.stderr
+    assert not out.exists()
 
 
 def _worker_environ() -> dict:

@@ -20,6 +20,7 @@ from handshadow.hands.posed import cast_shadow
 from handshadow.library import load_library_pose
 from handshadow.posefile import parse_pose
 from handshadow.scene import LAMP_TO_WALL_M, Scene, frame_height_for
+from tests.conftest import run_cli
 
 PY = [sys.executable, "-m", "handshadow.cli"]
 OUTPUTS = {
@@ -164,7 +165,7 @@ def test_bad_targets_fail_cleanly(tmp_path):
     ],
 )
 def test_bad_options_fail_cleanly(tmp_path, args, message):
-    res = _run(["fit", "dog"] + args + ["--out", str(tmp_path / "o")])
+    res = run_cli(["fit", "dog"] + args + ["--out", str(tmp_path / "o")])
     assert res.returncode == 2 and message in res.stderr and res.stderr.count("\n") == 1, res.stderr
     assert not (tmp_path / "o").exists()
 

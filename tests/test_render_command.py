@@ -11,6 +11,7 @@ import trimesh
 
 from handshadow.cli import main
 from handshadow.examples import pose_path
+from tests.conftest import run_cli
 
 PY = [sys.executable, "-m", "handshadow.cli"]
 
@@ -151,7 +152,7 @@ def test_bad_pose_files_fail_cleanly(tmp_path, name):
     path = tmp_path / f"{name}.json"
     path.write_text(BAD_POSES[name])
     out = tmp_path / "out"
-    res = subprocess.run(PY + ["render", str(path), "--out", str(out)], capture_output=True, text=True)
+    res = run_cli(["render", str(path), "--out", str(out)])
     assert res.returncode == 2
     assert res.stderr.startswith("handshadow: error: ") and res.stderr.count("\n") == 1, res.stderr
     assert "Traceback" not in res.stderr

@@ -26,6 +26,7 @@ from handshadow.scene import (
     views_from_json,
     views_to_json,
 )
+from tests.conftest import run_cli
 from tests.test_render_command import recompute_shadow
 
 PY = [sys.executable, "-m", "handshadow.cli"]
@@ -155,7 +156,7 @@ def _run(args):
 )
 def test_bad_view_input_fails_cleanly_and_writes_nothing(tmp_path, args, message):
     out = tmp_path / "o"
-    res = _run(["fit", *[str(tmp_path / a) if a == "MISSING.png" else a for a in args], "--out", str(out)])
+    res = run_cli(["fit", *[str(tmp_path / a) if a == "MISSING.png" else a for a in args], "--out", str(out)])
     assert res.returncode == 2, res.stderr
     assert res.stderr.startswith("handshadow: error: ") and res.stderr.count("\n") == 1, res.stderr
     assert message in res.stderr and "Traceback" not in res.stderr

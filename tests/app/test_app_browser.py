@@ -33,7 +33,7 @@ FLAGS = [
     "--disable-sync",
     "--host-resolver-rules=MAP * ~NOTFOUND , EXCLUDE 127.0.0.1",
 ]
-APP_TIME_LIMIT_S = 30  # handshadow app --time-limit: a fit's search ends then, its best finished
+APP_TIME_LIMIT_S = 12  # handshadow app --time-limit: a fit's search ends then, its best finished
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 RESULT_FILES = {
     "target.png",
