@@ -29,6 +29,19 @@ def test_a_usage_error_is_one_line_with_where_the_help_is(argv, reason, capsys):
     assert err.count("\n") == 1 and err.startswith(reason) and err.rstrip().endswith("--help)"), err
 
 
+@pytest.mark.parametrize(
+    "command", [["fit", "dog"], ["render", "rabbit"], ["interpolate", "dog", "bird"], ["batch", "dog"]]
+)
+def test_an_empty_out_is_refused_before_any_work(command, capsys, tmp_path, monkeypatch):
+    # `--out "$DIR"` with DIR unset: not the default folder, not the current one.
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as stop:
+        main([*command, "--out", ""])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and err.count("\n") == 1 and "argument --out: an empty name" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_bare_command_shows_what_it_can_do(capsys):
     assert main([]) == 2
     out = capsys.readouterr().out

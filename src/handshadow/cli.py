@@ -470,6 +470,14 @@ def _version() -> str:
         return "unknown"
 
 
+def out_path(text: str) -> str:
+    """--out's type: any path but an empty one (a shell variable left unset), which would
+    otherwise mean the default folder or the current one."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty name: give a folder (or file) name")
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="handshadow", description="Hand shadows: find, render and morph poses of your hands.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log details")
@@ -478,7 +486,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("render", help="render a pose file (or a built-in pose) into a result folder")
     p.add_argument("pose", help="pose.json written by 'fit', or the name of a built-in pose")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", type=out_path, required=True, help="output folder")
     p.add_argument("--force", action="store_true", help="write into a non-empty folder")
     p.add_argument("--mano-dir", help="folder with MANO_RIGHT.pkl / MANO_LEFT.pkl, for poses that use MANO")
     p.add_argument("--frame", type=int, default=0, help="which frame of a poses.json (from interpolate) to render")
@@ -504,7 +512,7 @@ def build_parser() -> argparse.ArgumentParser:
         " 45 to 135 either way, positive to your right)",
     )
     p.add_argument("--view-weights", help="one weight per target, e.g. 1,0.5 (default: equal)")
-    p.add_argument("--out", help="output folder (default: out/<target name>)")
+    p.add_argument("--out", type=out_path, help="output folder (default: out/<target name>)")
     _add_fit_options(p)
     p.add_argument(
         "--invert",
@@ -518,14 +526,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("a", help="the first target (image file or built-in example)")
     p.add_argument("b", help="the last target")
     p.add_argument("--frames", type=int, default=30, help="number of frames, ends included (default 30)")
-    p.add_argument("--out", help="output folder (default: out/<a>-to-<b>)")
+    p.add_argument("--out", type=out_path, help="output folder (default: out/<a>-to-<b>)")
     # Both ends must be good: a morph is judged by them.
     _add_fit_options(p, hands_default="2", quality_default="best", morph=True)
     p.set_defaults(func=cmd_interpolate)
 
     p = sub.add_parser("print", help="a 3D-printable sculpture of a result's hands, on a stand, with the torch's place")
     p.add_argument("result", help="a result folder written by 'fit' or 'render'")
-    p.add_argument("--out", help="the mesh file, .stl or .3mf (default: RESULT/print.stl and print.3mf)")
+    p.add_argument("--out", type=out_path, help="the mesh file, .stl or .3mf (default: RESULT/print.stl and print.3mf)")
     p.add_argument("--height-mm", type=float, default=150.0, help="height of the whole print (default 150)")
     p.add_argument("--no-stand", action="store_true", help="the hands alone, without board, foot and rods")
     p.add_argument("--min-wall-mm", type=float, default=1.2, help="thinnest part the printer makes (default 1.2)")
@@ -533,7 +541,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("batch", help="fit many targets on a Dask cluster (local by default), one folder each")
     p.add_argument("inputs", nargs="+", metavar="INPUT", help="image files, folders of images, globs or example names")
-    p.add_argument("--out", required=True, help="output folder: OUT/NAME/ per target, summary.csv, index.html")
+    p.add_argument(
+        "--out", type=out_path, required=True, help="output folder: OUT/NAME/ per target, summary.csv, index.html"
+    )
     p.add_argument("--workers", type=int, help="local cluster: worker processes (default: fitted to cores and memory)")
     p.add_argument(
         "--threads-per-worker", type=int, help="local cluster: threads (torch threads) per worker (default 1)"
