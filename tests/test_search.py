@@ -196,6 +196,23 @@ def test_settle_brings_a_slightly_moved_pose_back_into_its_shadow():
     assert settle(problem, truth, Settle(steps=10)) is truth  # nothing beats the truth: it comes back as it is
 
 
+def test_a_settling_pass_ends_once_nothing_has_won_for_its_patience(monkeypatch):
+    problem, truth = _problem_and_truth()
+    calls = {"n": 0}
+    real = finishing.view_objective
+
+    def counted(*args, **kwargs):
+        calls["n"] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(finishing, "view_objective", counted)
+    assert settle(problem, truth, Settle(steps=60, patience=10)) is truth  # nothing beats the truth
+    assert calls["n"] == 2 * 11  # each pass looks at steps 0, 5 and 10, and ends there
+    calls["n"] = 0
+    settle(problem, truth, Settle(steps=60, patience=1000))
+    assert calls["n"] == 2 * 61  # with patience past its length, each pass runs to its end
+
+
 def test_ctrl_c_in_the_settling_hands_back_the_best_so_far(monkeypatch):
     problem, truth = _problem_and_truth()
     off = _moved(truth, 0.006, 1.05)

@@ -255,7 +255,8 @@ def settle(
     the physical rules), ``settings.steps`` steps at a steady ``settings.lr_scale`` from the
     best so far; the best-scoring pose met on the way wins (metrics.ViewScores.key: a pass
     first, then IoU, thin parts and HD95), if it goes no deeper into other flesh than the
-    start (or the tolerance) and keeps arms that could be held."""
+    start (or the tolerance) and keeps arms that could be held. A pass ends early after
+    ``settings.patience`` steps without a win."""
     best = poses
     try:
         best_score = problem.scores(poses)[0]
@@ -265,7 +266,7 @@ def settle(
             stage = Stage(problem.height, 0.0, 0.0, settings.steps, 1, settings.lr_scale, 0.0)
             weights = settings.weights(name, problem.weights)
             params = PoseParameters(best, problem.limits)
-            found = {"score": best_score, "key": best_score.key(), "poses": best}
+            found = {"score": best_score, "key": best_score.key(), "poses": best, "step": 0}
 
             def evaluate(params=params, stage=stage, weights=weights):
                 terms, shadows = view_objective(problem, params.hands(), stage, weights)
@@ -277,8 +278,8 @@ def settle(
                 s = problem.judge([sh.mask.detach().cpu().numpy() > 0.5 for sh in shadows])[0]
                 current = params.poses()
                 if wins(problem, current, s, found["key"], keep_holdable, allowed):
-                    found.update(score=s, key=s.key(), poses=current)
-                return False
+                    found.update(score=s, key=s.key(), poses=current, step=step)
+                return step - found["step"] >= settings.patience  # nothing has won for a while: the pass ends
 
             try:
                 optimise(
