@@ -18,7 +18,7 @@ from handshadow.cli import main
 from handshadow.fit import FitConfig, fit_frame
 from handshadow.hands.posed import cast_shadow
 from handshadow.library import load_library_pose
-from handshadow.posefile import parse_pose
+from handshadow.posefile import load_pose_file
 from handshadow.scene import LAMP_TO_WALL_M, Scene, frame_height_for
 from tests.conftest import run_cli
 
@@ -47,8 +47,7 @@ def known_target(name: str, size: int, lamp_to_wall_m: float = LAMP_TO_WALL_M):
     ending in '-inside' is one of INSIDE_POSES. Under a farther lamp the hands move away from
     the wall by as much, so the shadow keeps its size."""
     if name.endswith("-inside"):
-        with open(os.path.join(INSIDE_POSES, f"{name}.json")) as f:
-            posed = parse_pose(json.load(f))
+        posed = load_pose_file(os.path.join(INSIDE_POSES, f"{name}.json"))
     else:
         posed = load_library_pose(name)
     shift = np.array([0.0, 0.0, lamp_to_wall_m - LAMP_TO_WALL_M])

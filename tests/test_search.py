@@ -117,9 +117,8 @@ def test_parameters_stay_within_the_limits_whatever_the_step():
 
 
 def test_separate_parts_hands_that_pass_through_each_other_and_keeps_the_shadow():
-    target, truth = known_target(
-        "bird-inside", SIZE
-    )  # the library's bird before 2026-12-07: palms 18 mm into each other
+    # The library's bird before 2026-12-07: palms 18 mm into each other.
+    target, truth = known_target("bird-inside", SIZE)
     problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
     poses = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
     assert problem.mesh_penetration(poses)[0].between_mm > 10
@@ -141,9 +140,8 @@ def test_separate_opens_a_fist_curled_into_its_palm():
 
 
 def test_a_stage_that_layers_its_hypotheses_refits_the_shadow_with_the_hands_apart():
-    target, truth = known_target(
-        "bird-inside", SIZE
-    )  # the library's bird before 2026-12-07: palms 18 mm into each other
+    # The library's bird before 2026-12-07: palms 18 mm into each other.
+    target, truth = known_target("bird-inside", SIZE)
     problem = make_problem(target, truth.scene, [h.side for h in truth.hands], FitConfig(size=SIZE))
     inside = PoseBatch([HandPoseBatch.from_hand_poses([h]) for h in truth.hands])
     refit = Stage(
