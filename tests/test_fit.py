@@ -20,6 +20,7 @@ from handshadow.hands.posed import cast_shadow
 from handshadow.library import load_library_pose
 from handshadow.posefile import load_pose_file
 from handshadow.scene import LAMP_TO_WALL_M, Scene, frame_height_for
+from handshadow.search.pieces import two_pieces
 from tests.conftest import run_cli
 
 PY = [sys.executable, "-m", "handshadow.cli"]
@@ -354,3 +355,27 @@ def test_hands_auto_takes_one_hand_when_its_search_passes():
     margin = ONE_HAND_PREFERENCE
     assert chosen(search(1, 1.0, 1.0), search(2, 1.0, 1.0 + margin / 2)) == 1
     assert chosen(search(1, 1.0, 1.0), search(2, 1.0, 1.0 + 2 * margin)) == 2
+
+
+def test_a_target_in_two_pieces_comes_back_with_a_hand_for_each_piece():
+    # The library's heart with its hands drawn 8 cm apart: two pieces, each one hand's shadow.
+    _, heart = known_target("heart", 128)
+    apart = {"right": np.array([0.08, 0.0, 0.0]), "left": np.array([-0.08, 0.0, 0.0])}
+    hands = tuple(dataclasses.replace(h, translation=h.translation + apart[h.side]) for h in heart.hands)
+    truth = dataclasses.replace(heart, hands=hands)
+    target = cast_shadow(truth)[1] > 0.5
+    pieces = two_pieces(target, truth.scene)
+    assert pieces is not None
+    reports = []
+    config = FitConfig(size=128, quality="fast", seed=1, exclude_library=("heart",), attempts=1)
+    result = fit_frame(target, config, progress=reports.append)  # hands auto: two pieces take two
+    assert result.score.success, result.score
+    assert [h.side for h in result.posed.hands] == ["right", "left"]
+    for hand, piece in zip(result.posed.hands, pieces):  # the right hand casts the right piece
+        alone = cast_shadow(dataclasses.replace(result.posed, hands=(hand,)))[1] > 0.5
+        assert (alone & piece).sum() > 0.9 * alone.sum() and (alone & piece).sum() > 0.8 * piece.sum()
+    # Progress counts the pieces' searches and the last stage as one search, with both hands.
+    total = reports[0].total
+    assert all(r.total == total and r.poses.n_hands == 2 for r in reports)
+    done = [r.done for r in reports if not r.hop]
+    assert done == sorted(done) and done[-1] == total

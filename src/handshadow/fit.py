@@ -57,6 +57,8 @@ from handshadow.search import (
 )
 from handshadow.search.atlas import load_atlas
 from handshadow.search.config import OUTLINE_THIN
+from handshadow.search.pieces import Partner, two_pieces
+from handshadow.search.stages import rank_details
 from handshadow.search.starts import choose_starts, start_key
 
 log = logging.getLogger(__name__)
@@ -527,11 +529,16 @@ def result_key(result: FitResult) -> tuple:
     return (not result.performable, *result.view_scores.key())
 
 
-def _skip_attempt(targets, scenes, config, extra_starts, anchor, tried: dict[int, set]) -> None:
+def _skip_attempt(targets, scenes, config, extra_starts, anchor, tried: dict) -> None:
     """An attempt not run (FitConfig.skip_attempts): only its starts are chosen, and its library
     and atlas starts added to ``tried`` as the attempt would have added them."""
-    for n in hand_counts(config, extra_starts if extra_starts is not None else anchor):
-        _prepare(targets, scenes, n, config, extra_starts, anchor, tried.setdefault(n, set()))
+    counts, pieces = search_plan(targets, scenes, config, extra_starts, anchor)
+    for n in counts:
+        if n == 2 and pieces is not None:
+            for side, piece in zip(PIECE_SIDES, pieces):
+                _prepare([piece], scenes, 1, config, None, None, tried.setdefault(("piece", side), set()), [side])
+        else:
+            _prepare(targets, scenes, n, config, extra_starts, anchor, tried.setdefault(n, set()))
 
 
 class GaveUp(Exception):
@@ -553,15 +560,27 @@ def _attempt(
     left out, and this attempt's are added. ``give_up``: a search may stop out of reach
     (search.stages.run_stages); when every one does, raises GaveUp."""
     t0 = time.perf_counter()
-    counts = hand_counts(config, extra_starts if extra_starts is not None else anchor)
+    counts, pieces = search_plan(targets, scenes, config, extra_starts, anchor)
+    tried = {} if tried is None else tried
     searches = []
     for i, n in enumerate(counts):
-        seen = set() if tried is None else tried.setdefault(n, set())
         # Each hand count gets an equal share of what is left of the limit, from its own set-up on.
         deadline = (limit - (time.perf_counter() - t0)) / (len(counts) - i) if limit else None
-        searches.append(
-            _search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop, seen, give_up)
-        )
+        if n == 2 and pieces is not None:
+            searches.append(_piece_search(targets, scenes, pieces, config, progress, deadline, stop, tried))
+            if searches[-1].search.interrupted or searches[-1].search.ranking[0]["iou"] >= PIECES_ALONE_IOU:
+                continue
+            # The pieces' hands fit loosely: the two-hand search from the whole target too, the better kept.
+            deadline = (limit - (time.perf_counter() - t0)) if limit else None
+            seen = tried.setdefault(n, set())
+            searches.append(
+                _search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop, seen, give_up)
+            )
+        else:
+            seen = tried.setdefault(n, set())
+            searches.append(
+                _search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop, seen, give_up)
+            )
         if searches[-1].search.interrupted:
             break
     steps = sum(s.search.steps for s in searches)
@@ -801,6 +820,119 @@ def fit_info(sc: FitScore, pen: Penetration, arms: ArmCheck, performers: int = 1
     }
 
 
+def search_plan(
+    targets, scenes, config: FitConfig, extra_starts=None, anchor=None
+) -> tuple[list[int], tuple[np.ndarray, np.ndarray] | None]:
+    """An attempt's searches: the hand counts (hand_counts) and, for a target in two pieces
+    (search.pieces.two_pieces; one view, no given starts or anchor), the pieces, (right's,
+    left's). Two pieces take two hands, so with --hands auto only the two-hand search runs."""
+    counts = hand_counts(config, extra_starts if extra_starts is not None else anchor)
+    pieces = None
+    if 2 in counts and len(targets) == 1 and extra_starts is None and anchor is None:
+        pieces = two_pieces(targets[0], scenes[0])
+    if pieces is not None:
+        counts = [2]
+    return counts, pieces
+
+
+def search_budget(targets, config: FitConfig) -> tuple[int, int]:
+    """(steps, searches) of an attempt's searches, for progress bars: one run of the stages per
+    hand count, or for a target in two pieces one search of a run per piece and a last stage
+    for both hands. ``targets``: (H, W) bool, or one per view."""
+    targets = [np.asarray(targets, bool)] if isinstance(targets, np.ndarray) else [np.asarray(t, bool) for t in targets]
+    scenes = view_scenes(targets, config)
+    device = resolve_device(config.device)
+    _, _, stages = schedule(config.quality, config.iters, targets[0].shape[0], device, len(targets))
+    counts, pieces = search_plan(targets, scenes, config)
+    per_search = sum(s.steps for s in stages)
+    if pieces is not None:
+        return 2 * per_search + stages[-1].steps, 1
+    return per_search * len(counts), len(counts)
+
+
+# A target in two pieces: the right hand searches the piece on the performer's right, the left
+# hand the other (search.pieces). When the pieces' search ends under PIECES_ALONE_IOU, the
+# two-hand search from the whole target runs too and the better is kept: a piece may want the
+# other hand (arms crossed).
+PIECE_SIDES = ("right", "left")
+PIECES_ALONE_IOU = 0.9
+
+
+def _piece_search(targets, scenes, pieces, config, progress, deadline, stop, tried: dict) -> HandCountFit:
+    """The two-hand search of a target in two pieces (search.pieces): each piece searched with
+    its own hand alone through the stages, the larger piece first and the other within one
+    person's reach of its result (search.pieces.Partner); then both hands together through the
+    last stage on the whole target. ``deadline`` (seconds, None: none) is shared by the three
+    in proportion to their steps; ``tried`` holds per piece ("piece", side) the starts
+    searched. Progress reports count the three as one search; each reports the pose of both
+    hands (a piece not searched yet: its best start) and its shadow on the whole target."""
+    t0 = time.perf_counter()
+    order = sorted(range(2), key=lambda k: -int(pieces[k].sum()))
+    prepared = {}
+    for k in order:
+        side = PIECE_SIDES[k]
+        prepared[k] = _prepare(
+            [pieces[k]], scenes, 1, config, None, None, tried.setdefault(("piece", side), set()), [side]
+        )
+    full = make_problem(targets[0], scenes[0], list(PIECE_SIDES), config)
+    stages = prepared[order[0]][2]
+    per_piece = sum(s.steps for s in stages)
+    total = 2 * per_piece + stages[-1].steps
+    best = {k: prepared[k][1].item(0) for k in order}  # the best start, until the piece is searched
+    steps, interrupted, timed_out = 0, False, False
+
+    def both() -> PoseBatch:
+        return PoseBatch([best[0].hands[0], best[1].hands[0]])
+
+    def tell(offset: int, k: int | None):
+        if progress is None:
+            return None
+
+        def report(p: Progress) -> None:
+            if k is None:  # both hands: the search's own report
+                progress(dataclasses.replace(p, done=offset + p.done, total=total))
+                return
+            hands = [best[0].hands[0], best[1].hands[0]]
+            hands[k] = p.poses.hands[0]
+            poses = PoseBatch(hands)
+            height = p.shadow.shape[0]
+            shadow = full.shadows(poses, height)[0].cpu().numpy()
+            target = full.level(height).maps.target.cpu().numpy() > 0.5
+            score = float(iou(shadow > 0.5, target))
+            progress(dataclasses.replace(p, done=offset + p.done, total=total, shadow=shadow, poses=poses, iou=score))
+
+        return report
+
+    def left_of(share: float) -> float | None:
+        return None if deadline is None else max(0.0, deadline - (time.perf_counter() - t0)) * share
+
+    partner = None
+    for j, k in enumerate(order):
+        problem, starts, _ = prepared[k]
+        if partner is not None:
+            problem = make_problem(pieces[k], scenes[0], [PIECE_SIDES[k]], config, partner=partner)
+        share = per_piece / (total - j * per_piece)
+        res = run_stages(problem, starts, stages, tell(j * per_piece, k), deadline_s=left_of(share), stop=stop)
+        best[k] = res.poses
+        steps += res.steps
+        interrupted, timed_out = interrupted or res.interrupted, timed_out or res.timed_out
+        if res.interrupted:
+            break
+        with torch.no_grad():
+            out = problem.pose(res.poses.hands)[0]
+        elbow = out.forearm_points[0, -1] if out.forearm_points.shape[1] else None
+        partner = Partner(res.poses.hands[0].translation[0], elbow)
+    if interrupted:
+        ranking = rank_details(full, both())
+        res = SearchResult(both(), steps, time.perf_counter() - t0, True, ranking, timed_out=timed_out)
+    else:
+        res = run_stages(full, both(), stages[-1:], tell(2 * per_piece, None), deadline_s=left_of(1.0), stop=stop)
+        res = dataclasses.replace(
+            res, steps=steps + res.steps, seconds=time.perf_counter() - t0, timed_out=timed_out or res.timed_out
+        )
+    return HandCountFit(2, list(PIECE_SIDES), full, res)
+
+
 def _search(
     targets,
     scenes,
@@ -822,13 +954,17 @@ def _search(
     return HandCountFit(n_hands, ["right", "left"][:n_hands], problem, res)
 
 
-def _prepare(targets, scenes, n_hands, config, extra_starts, anchor, tried=None) -> tuple[Problem, PoseBatch, list]:
-    """A search's problem, starts and stages for a hand count; the starts' library and atlas
-    entries are added to ``tried`` (and those already in it left out, SKIP_TRIED)."""
-    sides = ["right", "left"][:n_hands]
+def _prepare(
+    targets, scenes, n_hands, config, extra_starts, anchor, tried=None, sides=None, partner=None
+) -> tuple[Problem, PoseBatch, list]:
+    """A search's problem, starts and stages for a hand count (``sides``: the hands, default
+    the right, then the left; ``partner``: with one hand, the other held still, make_problem);
+    the starts' library and atlas entries are added to ``tried`` (and those already in it
+    left out, SKIP_TRIED)."""
+    sides = sides or ["right", "left"][:n_hands]
     weights = config.view_weights or (1.0,) * len(targets)
     more = [ViewTarget(s, t, w / weights[0]) for s, t, w in zip(scenes[1:], targets[1:], weights[1:])]
-    problem = make_problem(targets[0], scenes[0], sides, config, anchor, more)
+    problem = make_problem(targets[0], scenes[0], sides, config, anchor, more, partner)
     n_random, n_keep, stages = schedule(config.quality, config.iters, targets[0].shape[0], config.device, len(targets))
     rng = np.random.default_rng(config.seed)
     atlas = (
@@ -850,10 +986,12 @@ def make_problem(
     config: FitConfig,
     anchor: PoseBatch | None = None,
     more_views: Sequence[ViewTarget] = (),
+    partner: Partner | None = None,
 ) -> Problem:
     """The search's context for a target frame (H, W) bool: the config's hand model for each
     side ('right', 'left') and their joint limits (float32, on the config's device, 'auto'
-    resolved); further views of the same pose when given (search.Problem)."""
+    resolved); further views of the same pose when given; with one hand, the other hand held
+    still (search.Problem)."""
     dtype = torch.float32
     device = resolve_device(config.device)
     models = [
@@ -873,4 +1011,4 @@ def make_problem(
         anchor = anchor.to(device)
 
     reach = Reach().for_performers(config.performers)
-    return Problem(scene, target, models, limits, anchor=anchor, reach=reach, more_views=more_views)
+    return Problem(scene, target, models, limits, anchor=anchor, reach=reach, more_views=more_views, partner=partner)

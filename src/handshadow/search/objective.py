@@ -242,12 +242,17 @@ def _elbows(hands, outs) -> tuple[list, list[torch.Tensor]]:
 
 
 def _reach_term(problem: Problem, hands, elbows: list[torch.Tensor], w: Weights) -> torch.Tensor:
-    """Weighted (B,) term (hands.arms): wrists and elbows within the performers' reach."""
+    """Weighted (B,) term (hands.arms): wrists and elbows within the performers' reach (of each
+    other, or with one hand of the problem's partner, search.pieces.Partner)."""
     r = problem.reach
     reach = hands[0].translation.new_zeros(hands[0].batch)
-    if len(hands) == 2:
-        gap = (hands[0].translation - hands[1].translation).norm(dim=1)
+    partner = problem.partner if len(hands) == 1 else None
+    if len(hands) == 2 or partner is not None:
+        other = hands[1].translation if partner is None else partner.wrist.to(hands[0].translation)
+        gap = (hands[0].translation - other).norm(dim=-1)
         reach = losses.soft_range(gap, 0.0, r.max_wrist_gap_m, r.margin_m)
+        if partner is not None and partner.elbow is not None and elbows:
+            elbows = [elbows[0], partner.elbow.to(elbows[0]).expand_as(elbows[0])]
         if len(elbows) == 2:
             span = (elbows[0] - elbows[1]).norm(dim=1)
             reach = reach + losses.soft_range(span, 0.0, r.max_elbow_span_m, r.margin_m)

@@ -28,6 +28,7 @@ from handshadow.poses import HandPoseBatch, PoseBatch
 from handshadow.render import ShadowRenderer
 from handshadow.scene import Scene
 from handshadow.search.config import LearningRates, Reach, Weights
+from handshadow.search.pieces import Partner
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,6 +84,9 @@ class Problem:
         anchor: optional PoseBatch of batch 1 the solution should stay near (a morph's other end).
         more_views: further views the same pose must answer (ViewTarget, frames of the same
             size); the views' weights are normalised to sum 1 (one view: weight 1).
+        partner: with one hand, the other hand of a two-hand pose held still (search.pieces:
+            a target in two pieces, one hand searched at a time); the reach term keeps this
+            hand within one person's reach of it.
     """
 
     def __init__(
@@ -96,6 +100,7 @@ class Problem:
         rates: LearningRates = LearningRates(),
         reach: Reach = Reach(),
         more_views: Sequence[ViewTarget] = (),
+        partner: Partner | None = None,
     ):
         raw = [1.0, *(float(v.weight) for v in more_views)]
         self.views = [
@@ -108,6 +113,7 @@ class Problem:
         self.anchor = anchor
         self.rates = rates
         self.reach = reach
+        self.partner = partner
         self.device = models[0].rest_vertices.device
         self.dtype = models[0].rest_vertices.dtype
         self.penetration = PenetrationModel([hand_spheres(m.rig, m.has_forearm) for m in models], dtype=self.dtype).to(
