@@ -9,9 +9,15 @@ import pytest
 import torch
 
 from handshadow.cli import main
+from handshadow.fit import FitConfig, make_problem
+from handshadow.poses import HandPoseBatch
 from handshadow.render import ShadowRenderer
 from handshadow.scene import Scene
+from handshadow.search.config import Stage
+from handshadow.search.objective import objective
+from handshadow.search.pieces import Partner
 from tests.simulated_cuda import on_cuda, simulated_cuda
+from tests.test_fit import known_target
 
 
 class _Doubles(torch.autograd.Function):
@@ -86,3 +92,18 @@ def test_fit_command_on_simulated_cuda_writes_its_result(tmp_path):
     with simulated_cuda():
         assert main([*args, str(out)]) == 0
     assert {"pose.json", "shadow.png", "overlay.png", "hands.glb", "guide.png"} <= {p.name for p in out.iterdir()}
+
+
+def test_a_hand_searched_alone_keeps_its_reach_to_a_partner_on_simulated_cuda():
+    """The reach term against the other hand of a target in two pieces (search.pieces.Partner),
+    its wrist and elbow on the GPU, as fit._piece_search builds it."""
+    target, truth = known_target("dog", 64)
+    with simulated_cuda():
+        problem = make_problem(target, truth.scene, ["right"], FitConfig(size=64, device="cuda"))
+        hand = HandPoseBatch.from_hand_poses([truth.hands[0]], device="cuda")
+        with torch.no_grad():
+            elbow = problem.pose([hand])[0].forearm_points[0, -1]
+        partner = Partner(hand.translation[0] + torch.tensor([0.0, 0.0, 0.7], device="cuda"), elbow)
+        problem = make_problem(target, truth.scene, ["right"], FitConfig(size=64, device="cuda"), partner=partner)
+        terms, _ = objective(problem, [hand], Stage(height=64, blur_px=0, attract_px=0, steps=1, keep=1))
+        assert on_cuda(terms.reach) and float(terms.reach[0].cpu()) > 0.0

@@ -955,16 +955,15 @@ def _search(
 
 
 def _prepare(
-    targets, scenes, n_hands, config, extra_starts, anchor, tried=None, sides=None, partner=None
+    targets, scenes, n_hands, config, extra_starts, anchor, tried=None, sides=None
 ) -> tuple[Problem, PoseBatch, list]:
     """A search's problem, starts and stages for a hand count (``sides``: the hands, default
-    the right, then the left; ``partner``: with one hand, the other held still, make_problem);
-    the starts' library and atlas entries are added to ``tried`` (and those already in it
-    left out, SKIP_TRIED)."""
+    the right, then the left); the starts' library and atlas entries are added to ``tried``
+    (and those already in it left out, SKIP_TRIED)."""
     sides = sides or ["right", "left"][:n_hands]
     weights = config.view_weights or (1.0,) * len(targets)
     more = [ViewTarget(s, t, w / weights[0]) for s, t, w in zip(scenes[1:], targets[1:], weights[1:])]
-    problem = make_problem(targets[0], scenes[0], sides, config, anchor, more, partner)
+    problem = make_problem(targets[0], scenes[0], sides, config, anchor, more)
     n_random, n_keep, stages = schedule(config.quality, config.iters, targets[0].shape[0], config.device, len(targets))
     rng = np.random.default_rng(config.seed)
     atlas = (
