@@ -554,11 +554,14 @@ class GaveUp(Exception):
 def _attempt(
     targets, scenes, config, progress, extra_starts, anchor, stop, limit, tried=None, give_up: GiveUp | None = None
 ) -> FitResult:
-    """One attempt: a search per hand count, the chosen one finished and measured. ``limit``
-    bounds its search and polish in seconds (None: no limit). ``tried``: per hand count, the
-    library and atlas starts earlier attempts searched (search.starts.start_key); they are
-    left out, and this attempt's are added. ``give_up``: a search may stop out of reach
-    (search.stages.run_stages); when every one does, raises GaveUp."""
+    """One attempt: a search per hand count (search_plan; a target in two pieces: the pieces'
+    search, _piece_search, and the whole target's two-hand search too when the pieces end
+    under PIECES_ALONE_IOU), the chosen one finished and measured. ``limit``
+    bounds its search and polish in seconds (None: no limit). ``tried``: per hand count (per
+    piece: ("piece", side)), the library and atlas starts earlier attempts searched
+    (search.starts.start_key); they are left out, and this attempt's are added. ``give_up``:
+    a search may stop out of reach (search.stages.run_stages; not the pieces' search); when
+    every one does, raises GaveUp."""
     t0 = time.perf_counter()
     counts, pieces = search_plan(targets, scenes, config, extra_starts, anchor)
     tried = {} if tried is None else tried
