@@ -575,15 +575,10 @@ def _attempt(
                 continue
             # The pieces' hands fit loosely: the two-hand search from the whole target too, the better kept.
             deadline = (limit - (time.perf_counter() - t0)) if limit else None
-            seen = tried.setdefault(n, set())
-            searches.append(
-                _search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop, seen, give_up)
-            )
-        else:
-            seen = tried.setdefault(n, set())
-            searches.append(
-                _search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop, seen, give_up)
-            )
+        seen = tried.setdefault(n, set())
+        searches.append(
+            _search(targets, scenes, n, config, progress, deadline, extra_starts, anchor, stop, seen, give_up)
+        )
         if searches[-1].search.interrupted:
             break
     steps = sum(s.search.steps for s in searches)
