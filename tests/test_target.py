@@ -11,7 +11,7 @@ from PIL import Image
 
 from handshadow import photos
 from handshadow.examples import TARGETS
-from handshadow.target import TargetError, letterbox, load_target, read_image, read_shape, read_target
+from handshadow.target import TargetError, frame_picture, letterbox, load_target, read_image, read_shape, read_target
 
 SHARED_HSP = Path(__file__).resolve().parents[2] / "shared" / "targets" / "hsp"
 
@@ -30,9 +30,7 @@ def shape():
 
 
 def _reference(shape, size=64):
-    from handshadow.target import letterbox
-
-    return letterbox(shape.astype(float), size, size) >= 0.5
+    return frame_picture(shape.astype(float), size, size) >= 0.5
 
 
 @pytest.mark.parametrize(
@@ -110,15 +108,55 @@ def test_every_kind_of_image_gives_the_same_frame(tmp_path, shape, kind):
     assert (frame ^ ref).sum() <= 0.03 * ref.sum()
 
 
-def test_letterbox_keeps_aspect_and_centres(tmp_path):
+def test_a_wide_picture_is_cropped_to_its_shape_and_centred(tmp_path):
     wide = np.zeros((50, 200), bool)
     wide[10:40, 20:180] = True
     iio.imwrite(tmp_path / "wide.png", np.where(wide, 0, 255).astype(np.uint8))
     frame = load_target(tmp_path / "wide.png", 100, 100)
     rows, cols = np.nonzero(frame)
-    # 200 x 50 image -> a 100 x 25 band in rows 37..62; the shape's rows 10..40 land on 42..57.
-    assert 41 <= rows.min() <= 43 and 55 <= rows.max() <= 58
-    assert 9 <= cols.min() <= 11 and 88 <= cols.max() <= 90
+    # Columns 18..181 (the shape and a margin of 2 px) -> a 100 x 30 band in rows 35..64; the
+    # shape's rows 10..40 land on 41..59, its columns 20..179 on 1..98.
+    assert 40 <= rows.min() <= 42 and 58 <= rows.max() <= 60
+    assert 0 <= cols.min() <= 2 and 97 <= cols.max() <= 99
+
+
+def _arm_picture(n=120):
+    """A square picture (n, n) bool: a hand-like blob on a forearm that runs off its bottom."""
+    yy, xx = np.mgrid[:n, :n]
+    shape = ((yy - 0.35 * n) / (0.18 * n)) ** 2 + ((xx - 0.45 * n) / (0.22 * n)) ** 2 <= 1
+    shape |= (np.abs(xx - 0.5 * n - 0.1 * (yy - 0.35 * n)) <= 0.08 * n) & (yy >= 0.35 * n)
+    return shape
+
+
+@pytest.mark.parametrize("pad", ["wide", "tall"])
+def test_a_photo_of_another_aspect_frames_its_shape_as_a_square_picture_does(tmp_path, pad):
+    """A phone's 16:9 photo (wall on either side) or 3:4 photo (wall above) of a shadow whose
+    forearm runs off the bottom reads as the square picture does: the arm still leaves the
+    frame, and the shape keeps the frame's pixels (a letterbox would have ended the arm in the
+    air and shrunk the shape)."""
+    square = _arm_picture()
+    n = square.shape[0]
+    widths = ((0, 0), ((16 * n // 9 - n) // 2,) * 2) if pad == "wide" else ((n // 3, 0), (0, 0))
+    iio.imwrite(tmp_path / "photo.png", np.where(np.pad(square, widths), 0, 255).astype(np.uint8))
+    frame = load_target(tmp_path / "photo.png", 64, 64)
+    expected = letterbox(square.astype(float), 64, 64) >= 0.5
+    assert frame[-1].any()
+    # The crop centres the shape's span, not the picture: the same shape, moved sideways.
+    shift = round(np.nonzero(expected)[1].mean() - np.nonzero(frame)[1].mean())
+    moved = np.roll(frame, shift, axis=1)
+    assert (moved & expected).sum() / (moved | expected).sum() >= 0.95
+
+
+def test_a_shape_wider_than_the_frame_keeps_the_edge_it_runs_off(tmp_path):
+    """Wider than the frame's aspect even cropped: letterboxed, with the bottom it runs off on
+    the frame's bottom and the room left above it."""
+    picture = np.zeros((100, 300), bool)
+    picture[30:, 20:280] = True
+    iio.imwrite(tmp_path / "wide.png", np.where(picture, 0, 255).astype(np.uint8))
+    frame = load_target(tmp_path / "wide.png", 64, 64)
+    rows = np.flatnonzero(frame.any(axis=1))
+    assert rows[-1] == 63 and frame[-1].sum() >= 50
+    assert rows[0] >= 40  # the band of wall is above the shape, none below it
 
 
 def test_invert_overrides_the_border_rule(tmp_path, shape):
@@ -215,15 +253,15 @@ def test_a_cmyk_jpeg_reads_its_colours_not_its_black_ink_as_alpha(tmp_path):
     assert image[20, 20, :3].max() < 0.1 and image[2, 2, :3].min() > 0.9
 
 
-# The reading of clean masks as it was before the photo path (main at 73c9e89), word for word:
-# the photo path must never change a clean mask's frame.
+# The reading of clean masks as it was before the photo path (main at 73c9e89), word for word,
+# framed as every picture is (frame_picture): the photo path must never change a clean mask's frame.
 def _legacy_frame(path, width, height):
     rgba = read_image(path)
     grey = rgba[..., :3] @ np.array([0.299, 0.587, 0.114])
     border = np.concatenate([grey[0], grey[-1], grey[:, 0], grey[:, -1]])
     cover = grey if np.median(border) < 0.5 else 1.0 - grey
     lo, hi = np.percentile(cover, 1), np.percentile(cover, 99)
-    return letterbox(np.clip((cover - lo) / (hi - lo), 0.0, 1.0), width, height) >= 0.5
+    return frame_picture(np.clip((cover - lo) / (hi - lo), 0.0, 1.0), width, height) >= 0.5
 
 
 CLEAN = [TARGETS / f"{name}.png" for name in ("bird", "deer", "rabbit", "snail")] + [

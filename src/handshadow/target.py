@@ -20,9 +20,14 @@ Two readings, chosen by the image:
   touching the border whose outlines are much softer than the shape's are light, not shape
   (a hot spot behind a large shadow, dark corners), and are put right.
 
-Either way the coverage is letterboxed (aspect kept, centred) into the W x H frame and
-thresholded at one half, so anti-aliased and soft edges land where they should. A clean image
-never takes the photo path, so masks read exactly as they always have.
+Either way the coverage is framed (``frame_picture``) into the W x H frame and thresholded at
+one half, so anti-aliased and soft edges land where they should. A picture of another aspect
+than the frame's (a phone's 4:3 or 16:9 photo) is first cropped along its long side to its shape
+and a margin, no shorter than the frame's aspect asks; what is left over is letterboxed, with
+the picture's edges that the shape runs off (a forearm leaving the photo) kept on the frame's
+edges, so an arm the photo cuts is not made to end in the air. A picture of the frame's aspect
+is letterboxed as it is. A clean image never takes the photo path, so masks read exactly as they
+always have.
 
 A tilt of the camera is not undone: a few degrees of perspective change the shape by a few
 per cent; a strongly slanted photo gives a slanted target. A photo whose frame shows more than
@@ -32,6 +37,7 @@ the wall (the edge of the paper, the lamp, furniture) reads those as shape too; 
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -382,8 +388,10 @@ def _soft_components(
     return soft[labels]
 
 
-def letterbox(coverage: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Fit (h, w) coverage into a (height, width) frame, aspect kept, centred; area-averaged."""
+def letterbox(coverage: np.ndarray, width: int, height: int, anchor: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """Fit (h, w) coverage into a (height, width) frame, aspect kept; area-averaged. ``anchor``
+    (rows, columns) places the picture along each axis where it leaves room: -1 at the frame's
+    start (top, left), 0 centred, 1 at its end (bottom, right)."""
     from skimage.transform import resize
 
     h, w = coverage.shape
@@ -391,16 +399,72 @@ def letterbox(coverage: np.ndarray, width: int, height: int) -> np.ndarray:
     nw, nh = max(1, round(w * scale)), max(1, round(h * scale))
     small = resize(coverage, (nh, nw), order=1, anti_aliasing=scale < 1, mode="edge")
     frame = np.zeros((height, width))
-    y0, x0 = (height - nh) // 2, (width - nw) // 2
+    y0, x0 = ((room * (1 + a)) // 2 for room, a in ((height - nh, anchor[0]), (width - nw, anchor[1])))
     frame[y0 : y0 + nh, x0 : x0 + nw] = small
     return frame
+
+
+# A picture cropped to its shape along its long side keeps this share of its short side as a
+# margin on each side the shape does not run off.
+CROP_MARGIN_SHARE = 0.05
+
+
+def frame_picture(coverage: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Coverage (h, w) in [0, 1] -> the (height, width) frame, float: a picture longer than the
+    frame's aspect is cropped along its long side to its shape (coverage >= 0.5) with a margin of
+    CROP_MARGIN_SHARE of its short side, to no less than the frame's aspect and never past a
+    side the shape meets (it runs off there), then letterboxed (``letterbox``) with the sides the
+    shape meets on the frame's edges. A picture of the frame's aspect, or without a shape, is
+    letterboxed centred, as it is."""
+    shape = coverage >= 0.5
+    h, w = shape.shape
+    if not shape.any() or h * width == w * height:
+        return letterbox(coverage, width, height)
+    rows, cols = np.flatnonzero(shape.any(axis=1)), np.flatnonzero(shape.any(axis=0))
+    margin = max(1, round(CROP_MARGIN_SHARE * min(h, w)))
+    if w * height > h * width:  # wider than the frame: crop the columns
+        x0, x1 = _crop_span(cols[0], cols[-1], w, math.ceil(h * width / height), margin)
+        coverage = coverage[:, x0:x1]
+    else:
+        y0, y1 = _crop_span(rows[0], rows[-1], h, math.ceil(w * height / width), margin)
+        coverage = coverage[y0:y1]
+    shape = coverage >= 0.5
+    anchor = tuple(
+        _edge_anchor(first.any(), last.any()) for first, last in ((shape[0], shape[-1]), (shape[:, 0], shape[:, -1]))
+    )
+    return letterbox(coverage, width, height, anchor)
+
+
+def _crop_span(first: int, last: int, length: int, at_least: int, margin: int) -> tuple[int, int]:
+    """[start, end) along an axis of ``length`` pixels holding the shape's span first..last
+    with ``margin`` on each side it does not meet (an end it meets stays), grown to
+    ``at_least`` (away from an end the shape meets, else evenly) within the axis."""
+    meets_start, meets_end = first == 0, last == length - 1
+    start = 0 if meets_start else max(0, first - margin)
+    end = length if meets_end else min(length, last + 1 + margin)
+    short = min(at_least, length) - (end - start)
+    if short > 0:
+        if meets_start and not meets_end:
+            end += short
+        elif meets_end and not meets_start:
+            start -= short
+        else:
+            start = max(0, start - short // 2)
+            end = min(length, start + min(at_least, length))
+            start = end - min(at_least, length)
+    return int(start), int(end)
+
+
+def _edge_anchor(meets_start: bool, meets_end: bool) -> int:
+    """Where a letterboxed axis goes (letterbox's anchor): to the one end its shape meets, else centred."""
+    return -1 if meets_start and not meets_end else 1 if meets_end and not meets_start else 0
 
 
 def read_target(path: str | Path, width: int = 256, height: int = 256, invert: bool | None = None) -> Target:
     """The binary target frame (height, width), checked for a usable shape, with the reading's
     warning when it is unsure."""
     reading = read_shape(read_image(path), invert)
-    frame = letterbox(reading.coverage, width, height) >= 0.5
+    frame = frame_picture(reading.coverage, width, height) >= 0.5
     shape = reading.coverage >= 0.5
     if _too_few(frame) and shape.sum() >= SMALLEST_SHAPE_PX:  # a shape, too small for the frame: not empty
         raise TargetError(f"{path}: {_too_small(shape)}")
