@@ -108,16 +108,16 @@ def test_every_kind_of_image_gives_the_same_frame(tmp_path, shape, kind):
     assert (frame ^ ref).sum() <= 0.03 * ref.sum()
 
 
-def test_a_wide_picture_is_cropped_to_its_shape_and_centred(tmp_path):
+def test_letterbox_keeps_aspect_and_centres(tmp_path):
+    """A wide picture whose shape is clear of its sides maps onto the frame as it always has."""
     wide = np.zeros((50, 200), bool)
     wide[10:40, 20:180] = True
     iio.imwrite(tmp_path / "wide.png", np.where(wide, 0, 255).astype(np.uint8))
     frame = load_target(tmp_path / "wide.png", 100, 100)
     rows, cols = np.nonzero(frame)
-    # Columns 18..181 (the shape and a margin of 2 px) -> a 100 x 30 band in rows 35..64; the
-    # shape's rows 10..40 land on 41..59, its columns 20..179 on 1..98.
-    assert 40 <= rows.min() <= 42 and 58 <= rows.max() <= 60
-    assert 0 <= cols.min() <= 2 and 97 <= cols.max() <= 99
+    # 200 x 50 image -> a 100 x 25 band in rows 37..62; the shape's rows 10..40 land on 42..57.
+    assert 41 <= rows.min() <= 43 and 55 <= rows.max() <= 58
+    assert 9 <= cols.min() <= 11 and 88 <= cols.max() <= 90
 
 
 def _arm_picture(n=120):
@@ -145,6 +145,17 @@ def test_a_photo_of_another_aspect_frames_its_shape_as_a_square_picture_does(tmp
     shift = round(np.nonzero(expected)[1].mean() - np.nonzero(frame)[1].mean())
     moved = np.roll(frame, shift, axis=1)
     assert (moved & expected).sum() / (moved | expected).sum() >= 0.95
+
+
+def test_a_speck_on_the_border_does_not_move_the_frame(tmp_path):
+    """A wide picture whose shape is clear of its sides, with one dark pixel of dust on its
+    edge: framed as without the dust (letterboxed, centred)."""
+    picture = np.full((300, 400), 255, np.uint8)
+    picture[100:200, 150:250] = 0
+    iio.imwrite(tmp_path / "clean.png", picture)
+    picture[150, 399] = 0
+    iio.imwrite(tmp_path / "dust.png", picture)
+    assert np.array_equal(load_target(tmp_path / "dust.png", 64, 64), load_target(tmp_path / "clean.png", 64, 64))
 
 
 def test_a_shape_wider_than_the_frame_keeps_the_edge_it_runs_off(tmp_path):

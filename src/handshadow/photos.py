@@ -132,8 +132,8 @@ def _jpeg(rgb: np.ndarray, quality: int) -> np.ndarray:
 
 
 def read_back(photo: np.ndarray, truth: np.ndarray, size_px: int = 256):
-    """Read ``photo`` (H, W, 3) uint8 as ``target.py`` reads a file and compare it with
-    ``truth`` (H, W) bool, both letterboxed into a size x size frame.
+    """Read ``photo`` (H, W, 3) uint8's shape as ``target.py`` reads a file's and compare it
+    with ``truth`` (H, W) bool, both letterboxed (centred) into a size x size frame.
 
     Returns (IoU, the target.Reading)."""
     from handshadow.metrics import iou

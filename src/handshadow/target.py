@@ -21,12 +21,11 @@ Two readings, chosen by the image:
   (a hot spot behind a large shadow, dark corners), and are put right.
 
 Either way the coverage is framed (``frame_picture``) into the W x H frame and thresholded at
-one half, so anti-aliased and soft edges land where they should. A picture of another aspect
-than the frame's (a phone's 4:3 or 16:9 photo) is first cropped along its long side to its shape
-and a margin, no shorter than the frame's aspect asks; what is left over is letterboxed, with
-the picture's edges that the shape runs off (a forearm leaving the photo) kept on the frame's
-edges, so an arm the photo cuts is not made to end in the air. A picture of the frame's aspect
-is letterboxed as it is. A clean image never takes the photo path, so masks read exactly as they
+one half, so anti-aliased and soft edges land where they should: letterboxed (aspect kept,
+centred), except that a picture of another aspect than the frame's (a phone's 4:3 or 16:9
+photo) whose shape runs off its side (a forearm leaving the photo) is first cropped along its
+long side to the shape and a margin, and what is left over is letterboxed with the sides the
+shape runs off on the frame's edges, so an arm the photo cuts is not made to end in the air. A clean image never takes the photo path, so masks read exactly as they
 always have.
 
 A tilt of the camera is not undone: a few degrees of perspective change the shape by a few
@@ -410,29 +409,48 @@ CROP_MARGIN_SHARE = 0.05
 
 
 def frame_picture(coverage: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Coverage (h, w) in [0, 1] -> the (height, width) frame, float: a picture longer than the
-    frame's aspect is cropped along its long side to its shape (coverage >= 0.5) with a margin of
-    CROP_MARGIN_SHARE of its short side, to no less than the frame's aspect and never past a
-    side the shape meets (it runs off there), then letterboxed (``letterbox``) with the sides the
-    shape meets on the frame's edges. A picture of the frame's aspect, or without a shape, is
-    letterboxed centred, as it is."""
-    shape = coverage >= 0.5
-    h, w = shape.shape
-    if not shape.any() or h * width == w * height:
+    """Coverage (h, w) in [0, 1] -> the (height, width) frame, float. A picture of another
+    aspect than the frame's whose shape (coverage >= 0.5, specks aside: SPECK_SHARE) runs off one
+    of its sides is cropped
+    along its long side to the shape with a margin of CROP_MARGIN_SHARE of its short side, to no
+    less than the frame's aspect and never past a side the shape meets, then letterboxed
+    (``letterbox``) with the sides the shape meets on the frame's edges: an arm that leaves the
+    picture leaves the frame. Any other picture (the frame's aspect, or a shape clear of the
+    picture's sides) is letterboxed centred, as it is, so the picture's pixels map onto the
+    frame's as they always have."""
+    h, w = coverage.shape
+    if h * width == w * height:
+        return letterbox(coverage, width, height)
+    shape = _without_specks(coverage >= 0.5)
+    if not _ring(shape).any():
         return letterbox(coverage, width, height)
     rows, cols = np.flatnonzero(shape.any(axis=1)), np.flatnonzero(shape.any(axis=0))
     margin = max(1, round(CROP_MARGIN_SHARE * min(h, w)))
     if w * height > h * width:  # wider than the frame: crop the columns
         x0, x1 = _crop_span(cols[0], cols[-1], w, math.ceil(h * width / height), margin)
-        coverage = coverage[:, x0:x1]
+        coverage, shape = coverage[:, x0:x1], shape[:, x0:x1]
     else:
         y0, y1 = _crop_span(rows[0], rows[-1], h, math.ceil(w * height / width), margin)
-        coverage = coverage[y0:y1]
-    shape = coverage >= 0.5
+        coverage, shape = coverage[y0:y1], shape[y0:y1]
     anchor = tuple(
         _edge_anchor(first.any(), last.any()) for first, last in ((shape[0], shape[-1]), (shape[:, 0], shape[:, -1]))
     )
     return letterbox(coverage, width, height, anchor)
+
+
+# Pieces of a picture's shape under this share of its largest piece are specks (dust, noise):
+# they do not move the frame_picture's crop.
+SPECK_SHARE = 0.01
+
+
+def _without_specks(shape: np.ndarray) -> np.ndarray:
+    """Shape (h, w) bool without its pieces (8-connected) under SPECK_SHARE of the largest."""
+    labels, n = ndi.label(shape, np.ones((3, 3)))
+    if n <= 1:
+        return shape
+    sizes = np.bincount(labels.ravel())
+    sizes[0] = 0
+    return (sizes >= SPECK_SHARE * sizes.max())[labels]
 
 
 def _crop_span(first: int, last: int, length: int, at_least: int, margin: int) -> tuple[int, int]:
