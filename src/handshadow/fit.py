@@ -878,6 +878,7 @@ def _piece_search(targets, scenes, pieces, config, progress, deadline, stop, tri
     total = 2 * per_piece + stages[-1].steps
     best = {k: prepared[k][1].item(0) for k in order}  # the best start, until the piece is searched
     steps, interrupted, timed_out = 0, False, False
+    whole: dict[int, np.ndarray] = {}  # the whole target per frame height, for progress reports
 
     def both() -> PoseBatch:
         return PoseBatch([best[0].hands[0], best[1].hands[0]])
@@ -895,8 +896,9 @@ def _piece_search(targets, scenes, pieces, config, progress, deadline, stop, tri
             poses = PoseBatch(hands)
             height = p.shadow.shape[0]
             shadow = full.shadows(poses, height)[0].cpu().numpy()
-            target = full.level(height).maps.target.cpu().numpy() > 0.5
-            score = float(iou(shadow > 0.5, target))
+            if height not in whole:  # the whole target at this stage's size, off the device once
+                whole[height] = full.level(height).maps.target.cpu().numpy() > 0.5
+            score = float(iou(shadow > 0.5, whole[height]))
             progress(dataclasses.replace(p, done=offset + p.done, total=total, shadow=shadow, poses=poses, iou=score))
 
         return report

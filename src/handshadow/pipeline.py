@@ -25,7 +25,7 @@ from handshadow.export.images import mask_image, overlay_image, overlay_preview
 from handshadow.export.meshes import write_glb, write_obj
 from handshadow.export.pictures import performer_framing, performer_view, plan_picture, scene_picture
 from handshadow.export.plots import path_plot
-from handshadow.fit import FitConfig, FitResult, fit_frame, search_budget, view_scenes
+from handshadow.fit import FitConfig, FitResult, fit_frame, search_budget
 from handshadow.guide import (
     describe,
     guide_image,
@@ -181,7 +181,7 @@ def fit_to_folder(
     ResultFolder(out, force)  # refuse an unusable output folder before the work
     sources = [target_source] if isinstance(target_source, str) else list(target_source)
     frames = [resolve_target(source, config.size, config.size, invert) for source in sources]
-    view_scenes(frames, config)  # bad view options fail here, before the work
+    # The budget sizes the views (fit.view_scenes): bad view options fail here, before the work.
     total, searches = search_budget(frames[0] if len(frames) == 1 else frames, config)
     recorder = FrameRecorder(total, searches)
     bar = tqdm(total=total, desc="fitting", unit="step", leave=False) if show_progress and sys.stderr.isatty() else None
