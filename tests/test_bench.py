@@ -1,5 +1,6 @@
-"""The benches' own rules: a bad count is refused in one line before any fit starts, and the
-recovery bench draws only poses a fit may return."""
+"""The benches' own rules: a bad count is refused in one line before any fit starts, the
+recovery bench draws only poses a fit may return, and the reading bench frames pictures of
+another aspect."""
 
 import subprocess
 import sys
@@ -45,3 +46,29 @@ def test_the_recovery_bench_draws_only_poses_a_fit_may_return():
         pen = pose_penetration(posed, meshes)
         assert pen.between_mm <= 3.0 and max(pen.within_mm) <= 3.0, pen
         assert arm_check(posed).holdable()
+
+
+def test_the_reading_bench_frames_a_photo_of_another_aspect_as_its_square_picture(tmp_path):
+    """bench/targets.py --aspects: an arm running off the bottom of a square mask, framed from
+    16:9 and 3:4 pictures, as the square picture frames it; a shape clear of its sides is left
+    out (letterboxed as always)."""
+    with_arm, clear = np.full((96, 96), 255, np.uint8), np.full((96, 96), 255, np.uint8)
+    with_arm[20:50, 30:70] = 0
+    with_arm[50:, 45:60] = 0
+    clear[20:70, 30:70] = 0
+    Image.fromarray(with_arm).save(tmp_path / "arm.png")
+    Image.fromarray(clear).save(tmp_path / "clear.png")
+    bench = BENCH.with_name("targets.py")
+    run = subprocess.run(
+        [sys.executable, str(bench), str(tmp_path), "--aspects", "--size", "64"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    summaries = [
+        dict(kv.split("=") for kv in line.split()[1:]) for line in run.stdout.splitlines() if line.startswith("SUMMARY")
+    ]
+    assert [r["aspect"] for r in summaries] == ["16:9", "3:4"]
+    for r in summaries:  # the arm's mask alone, its arm still leaving the frame, the same shape moved
+        assert r["n"] == "1" and r["same_edges"] == "1" and float(r["min_iou"]) >= 0.95
