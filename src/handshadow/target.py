@@ -25,8 +25,8 @@ one half, so anti-aliased and soft edges land where they should: letterboxed (as
 centred), except that a picture of another aspect than the frame's (a phone's 4:3 or 16:9
 photo) whose shape runs off its side (a forearm leaving the photo) is first cropped along its
 long side to the shape and a margin, and what is left over is letterboxed with the sides the
-shape runs off on the frame's edges, so an arm the photo cuts is not made to end in the air. A clean image never takes the photo path, so masks read exactly as they
-always have.
+shape runs off on the frame's edges, so an arm the photo cuts is not made to end in the air.
+A clean image never takes the photo path, so masks read exactly as they always have.
 
 A tilt of the camera is not undone: a few degrees of perspective change the shape by a few
 per cent; a strongly slanted photo gives a slanted target. A photo whose frame shows more than
@@ -411,9 +411,8 @@ CROP_MARGIN_SHARE = 0.05
 def frame_picture(coverage: np.ndarray, width: int, height: int) -> np.ndarray:
     """Coverage (h, w) in [0, 1] -> the (height, width) frame, float. A picture of another
     aspect than the frame's whose shape (coverage >= 0.5, specks aside: SPECK_SHARE) runs off one
-    of its sides is cropped
-    along its long side to the shape with a margin of CROP_MARGIN_SHARE of its short side, to no
-    less than the frame's aspect and never past a side the shape meets, then letterboxed
+    of its sides is cropped along its long side to the shape with a margin of CROP_MARGIN_SHARE
+    of its short side, to no less than the frame's aspect and never past a side the shape meets, then letterboxed
     (``letterbox``) with the sides the shape meets on the frame's edges: an arm that leaves the
     picture leaves the frame. Any other picture (the frame's aspect, or a shape clear of the
     picture's sides) is letterboxed centred, as it is, so the picture's pixels map onto the
